@@ -22,6 +22,10 @@ from ._errors import InputError as InputError
 from ._exact import symmetric_solution as symmetric_solution
 from ._integrate import Trajectory as Trajectory
 from ._integrate import integrate as integrate
+from ._order import OrderFit as OrderFit
+from ._order import fit_order as fit_order
+from ._order import global_errors as global_errors
+from ._order import ladder as ladder
 from ._rotations import hat as hat
 from ._rotations import rotation_matrix as rotation_matrix
 from ._schemes import Scheme as Scheme

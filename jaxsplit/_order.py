@@ -1,0 +1,60 @@
+"""Empirical convergence order: global errors over a ladder of step counts, log-log fit.
+
+``global_errors`` compiles ONE integration for the whole ladder: every step size runs the
+largest step count under ``vmap`` with every state saved, and the state at ``t_end`` is
+picked for each (a new step count would otherwise mean a new compilation).
+``fit_order`` fits log(error) = p log(h) + c over the points whose error lies in a fixed
+window: above round-off and below the pre-asymptotic regime.
+"""
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._errors import InputError
+from ._integrate import integrate
+
+ORDER_WINDOW = (1e-11, 1e-4)
+
+
+class OrderFit(NamedTuple):
+    order: float
+    step_sizes: np.ndarray
+    errors: np.ndarray
+    used: np.ndarray  # mask of the points inside the window
+
+
+def fit_order(step_sizes, errors, window=ORDER_WINDOW, min_points: int = 3) -> OrderFit:
+    """Least-squares slope of log(error) against log(h) over points with error in ``window``."""
+    h = np.abs(np.asarray(step_sizes, dtype=float))
+    e = np.asarray(errors, dtype=float)
+    used = np.isfinite(e) & (e >= window[0]) & (e <= window[1])
+    if used.sum() < min_points:
+        raise InputError(
+            f"only {int(used.sum())} errors lie in the fit window {window} (need {min_points}): "
+            f"errors were {np.array2string(e, precision=2)}; choose other step counts"
+        )
+    slope = np.polyfit(np.log(h[used]), np.log(e[used]), 1)[0]
+    return OrderFit(float(slope), h, e, used)
+
+
+def global_errors(step, x0, t_end: float, counts, reference):
+    """(step sizes, max-norm errors at ``t_end``) for each step count in ``counts``."""
+    counts = np.asarray(sorted(int(n) for n in counts))
+    if counts[0] < 1:
+        raise InputError(f"step counts must be >= 1, got {counts.tolist()}")
+    dtype = jnp.result_type(*jax.tree_util.tree_leaves(x0))
+    hs = jnp.asarray(t_end / counts, dtype=dtype)
+    saved = jax.vmap(lambda h: integrate(step, x0, h, int(counts[-1]), save_every=1).x)(hs)
+    rows = jnp.arange(len(counts))
+    finals = jax.tree_util.tree_map(lambda a: a[rows, counts], saved)
+    diffs = jax.tree_util.tree_map(lambda a, r: jnp.abs(a - r).reshape(len(counts), -1), finals, reference)
+    errors = jnp.max(jnp.concatenate(jax.tree_util.tree_leaves(diffs), axis=1), axis=1)
+    return np.asarray(hs), np.asarray(errors)
+
+
+def ladder(start: int, factor: float = 16.0, points: int = 12):
+    """Step counts growing geometrically from ``start`` by ``factor`` overall."""
+    return sorted({int(round(start * factor ** (k / (points - 1)))) for k in range(points)})
