@@ -7,29 +7,70 @@ status 2, never a traceback. The CLI runs in float64.
 
 import argparse
 import importlib
+import re
 import sys
 
 from .._errors import InputError
 
-COMMANDS = ("simulate", "schemes")
+COMMANDS = ("simulate", "schemes", "check", "sweep", "fit", "paper")
+
+EPILOG = """\
+commands:
+  simulate   integrate a body, write the trajectory (.npz/.csv) and a figure, print a summary
+  schemes    the table of composition schemes
+  check      Poisson defect and measured order of a scheme on a body
+  sweep      many cases in resumable chunks (--resume after Ctrl-C or a kill)
+  fit        fit models to sweep results
+  paper      reproduce the seed paper's figures and tables
+
+examples:
+  jaxsplit simulate                       # the paper's symmetric body with Lie-Trotter
+  jaxsplit schemes
+  jaxsplit check --scheme kahan-li-6 --split casimir
+  jaxsplit COMMAND --help                 # options and examples of each command
+
+exit status: 0 success; 2 bad input (one line on stderr); 3 the state became non-finite
+(what was computed is kept); 130 interrupted.
+"""
+
+# argparse treats "-0.6,0,0.8" as an option; these parsers have no option that looks
+# like a number, so anything starting with "-digit" or "-.digit" is a value.
+_NEGATIVE_NUMBER = re.compile(r"^-\.?\d")
 
 
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors (exit status 2) instead of usage dumps."""
 
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = _NEGATIVE_NUMBER
+
     def error(self, message):
         raise InputError(f"{self.prog}: {message}")
 
 
+def _load(name):
+    """The subcommand module, or None when it is not installed (yet)."""
+    module_name = f"{__name__}.{name}"
+    try:
+        return importlib.import_module(module_name)
+    except ModuleNotFoundError as err:
+        if err.name == module_name:
+            return None
+        raise
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="jaxsplit", description=__doc__.splitlines()[0],
+    parser = _Parser(prog="jaxsplit", description=__doc__.splitlines()[0], epilog=EPILOG,
                      formatter_class=argparse.RawDescriptionHelpFormatter)
     from .. import __version__
 
     parser.add_argument("--version", action="version", version=f"jaxsplit {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    for name in COMMANDS:
-        importlib.import_module(f".{name}", __name__).add_parser(sub)
+    for name in dict.fromkeys(COMMANDS):
+        module = _load(name)
+        if module is not None:
+            module.add_parser(sub)
     return parser
 
 
@@ -45,11 +86,17 @@ def main(argv=None) -> int:
             return 0
         return args.func(args) or 0
     except InputError as err:
-        print(f"jaxsplit: error: {err}", file=sys.stderr)
+        print(f"jaxsplit: error: {_one_line(err)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("jaxsplit: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `jaxsplit schemes | head`
+        return 0
+
+
+def _one_line(err) -> str:
+    return " ".join(str(err).split())
 
 
 if __name__ == "__main__":
