@@ -33,6 +33,9 @@ from ._schemes import schemes as schemes
 from ._schemes import triple_jump as triple_jump
 from ._splitting import AxisRotation as AxisRotation
 from ._splitting import splitting as splitting
+from ._sweep import reference_solution as reference_solution
+from ._sweep import sweep as sweep
+from ._sweep import sweep_cases as sweep_cases
 
 try:
     __version__ = version("jaxsplit")
