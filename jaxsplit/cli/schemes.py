@@ -1,17 +1,39 @@
-"""``jaxsplit schemes``: the registry as a table."""
+"""``jaxsplit schemes``: the registry as a table (or JSON)."""
+
+import argparse
 
 from .._schemes import schemes
+from . import _common as c
+
+EXAMPLES = """\
+examples:
+  jaxsplit schemes                 # name, order, stages, form, citation
+  jaxsplit schemes --json          # one JSON object: {"schemes": [...]} with the coefficients
+
+Every name works with --scheme of simulate, check and sweep; triple-jump-N resolves for any
+even N >= 2. Partitioned schemes need --split casimir (two pieces).
+"""
 
 
 def add_parser(sub):
     p = sub.add_parser("schemes", help="list the composition schemes",
-                       description="List every registered scheme: name, order, stages, form, citation.")
+                       description="List every registered scheme: name, order, stages, form, citation.",
+                       epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--json", action="store_true", help="print one JSON object (with the coefficients)")
     p.set_defaults(func=run)
 
 
 def run(args):
-    rows = [(s.name, str(s.order), str(s.stages), s.form, s.citation) for s in map(schemes.get, schemes)]
-    widths = [max(len(r[i]) for r in rows + [("name", "order", "stages", "form", "")]) for i in range(4)]
+    table = [schemes[name] for name in schemes]
+    if args.json:
+        c.print_json({"schemes": [
+            {"name": s.name, "order": s.order, "stages": s.stages, "form": s.form,
+             "symmetric": s.symmetric, "citation": s.citation, "coefficients": list(s.coefficients)}
+            for s in table]})
+        return 0
     header = ("name", "order", "stages", "form", "citation")
-    for row in [header] + rows:
-        print("  ".join(c.ljust(w) for c, w in zip(row[:4], widths)) + "  " + row[4])
+    rows = [header] + [(s.name, str(s.order), str(s.stages), s.form, s.citation) for s in table]
+    widths = [max(len(r[i]) for r in rows) for i in range(4)]
+    for row in rows:
+        print("  ".join(cell.ljust(w) for cell, w in zip(row[:4], widths)) + "  " + row[4])
+    return 0

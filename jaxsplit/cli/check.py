@@ -1,0 +1,172 @@
+"""``jaxsplit check``: is a scheme Poisson on a body, and what order does it reach?
+
+* Poisson defect (seed paper, Observation 3.1): max |DΦ Π(x) DΦᵀ − Π(Φ(x))| over random
+  states x on the unit sphere, DΦ by ``jax.jacfwd``, Π = hat, one step of size ``--dt``.
+* Measured order: global errors at ``--t-end`` over a ladder of 12 step counts (factor 16),
+  log-log slope fitted over the errors inside ``ORDER_WINDOW`` (``jaxsplit._order``). The
+  reference is the exact solution for a symmetric body, the 30-digit value for the standard
+  case, and otherwise a Casimir-split 8th-order run whose own error is estimated (step
+  halving) and reported.
+"""
+
+import argparse
+
+import numpy as np
+
+from .._body import PAPER_BODY, PAPER_M0, STANDARD_CASE
+from .._errors import InputError
+from .._order import ORDER_WINDOW
+from . import _common as c
+
+POISSON_TOL = 1e-12  # a Poisson map's defect is round-off: ~1e-16 per unit of |m|
+ORDER_TOL = 0.3  # |measured - nominal order| allowed
+LADDER_START = {1: 2000, 2: 200, 4: 30, 6: 16, 8: 10, 10: 4}  # at T = 10, as in the core tests
+EXIT_FAILED = 1
+
+EXAMPLES = """\
+examples:
+  jaxsplit check                                     # Lie-Trotter on the paper's symmetric body
+  jaxsplit check --scheme kahan-li-6 --split casimir --inertia 3,2,1.5 --m0 0.2,0.9,0.3
+  jaxsplit check --scheme strang --inertia 2,1,0.6667 --allow-nonphysical --json
+
+exit status: 0 both checks pass; 1 a check fails (defect above 1e-12, or the measured order
+more than 0.3 from the nominal one); 2 bad input.
+"""
+
+
+def add_parser(sub):
+    p = sub.add_parser(
+        "check", help="Poisson defect and measured order of a scheme on a body",
+        description="Measure the Poisson defect (jacfwd, random unit states) and the "
+                    "convergence order (global error ladder, log-log fit) of a scheme on a body.",
+        epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--scheme", default="lie-trotter", help="any name from `jaxsplit schemes` (default lie-trotter)")
+    p.add_argument("--split", choices=("axes", "casimir"), default="axes", help="(default axes)")
+    p.add_argument("--shift-axis", choices=("auto", "1", "2", "3"), default=None,
+                   help="axis of the Casimir shift, with --split casimir (default auto)")
+    p.add_argument("--inertia", type=c.vector3("--inertia", "I1,I2,I3"), default=PAPER_BODY, metavar="I1,I2,I3",
+                   help=f"(default {c.fmt_vec(PAPER_BODY)})")
+    p.add_argument("--m0", type=c.vector3("--m0"), default=PAPER_M0, metavar="A,B,C",
+                   help=f"initial state of the order measurement (default {c.fmt_vec(PAPER_M0)})")
+    p.add_argument("--allow-nonphysical", action="store_true", help="accept bodies violating the triangle inequalities")
+    p.add_argument("--dt", type=c.nonzero_float, default=0.1, metavar="H", help="step of the Poisson check (default 0.1)")
+    p.add_argument("--states", type=c.positive_int, default=32, metavar="N",
+                   help="random unit states of the Poisson check (default 32)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the random states (default 0)")
+    p.add_argument("--t-end", type=c.positive_float, default=10.0, metavar="T",
+                   help="time of the order measurement (default 10)")
+    p.add_argument("--start", type=c.positive_int, metavar="N",
+                   help="smallest step count of the ladder (default by order: 2000 for order 1 ... 4 for 10)")
+    p.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    p.set_defaults(func=run)
+
+
+def _poisson_defect_fn():
+    try:
+        from .._poisson_check import poisson_defect
+    except ImportError:  # the verification module is optional: same formula, locally
+        import jax
+
+        def poisson_defect(step, poisson_matrix, x, h):
+            jac = jax.jacfwd(lambda y: step(y, h))(x)
+            return jax.numpy.max(jax.numpy.abs(jac @ poisson_matrix(x) @ jac.T - poisson_matrix(step(x, h))))
+    return poisson_defect
+
+
+def run(args):
+    import jax
+    import jax.numpy as jnp
+
+    from .._exact import symmetric_solution, symmetry_axis
+    from .._order import fit_order, global_errors, ladder
+    from .._schemes import schemes
+    from .._splitting import auto_shift_axis, splitting
+
+    body = c.check_body(args.inertia, args.allow_nonphysical)
+    scheme = schemes[args.scheme]
+    if not scheme.pieces_allowed(3 if args.split == "axes" else 2):
+        raise InputError(f"--scheme {scheme.name} is {scheme.form} (exactly two pieces) and does not fit "
+                         "--split axes (three pieces); use --split casimir")
+    if args.shift_axis is not None and args.split != "casimir":
+        raise InputError("--shift-axis applies only with --split casimir")
+    shift = "auto" if args.shift_axis in (None, "auto") else int(args.shift_axis)
+    if args.split == "casimir" and shift == "auto":
+        shift = auto_shift_axis(body) + 1
+    m0 = jnp.asarray(args.m0, dtype=jnp.float64)
+    if not np.any(np.asarray(args.m0)):
+        raise InputError("--m0 must be non-zero (the order is measured on a moving state)")
+    kwargs = {"shift_axis": shift} if args.split == "casimir" else {}
+    step = splitting(body, scheme, args.split, **kwargs)
+
+    # ---- Poisson defect over random unit states
+    rng = np.random.default_rng(args.seed)
+    xs = rng.standard_normal((args.states, 3))
+    xs /= np.linalg.norm(xs, axis=1, keepdims=True)
+    defect = _poisson_defect_fn()
+    defects = np.asarray(jax.jit(jax.vmap(lambda x: defect(step, body.poisson_matrix, x, args.dt)))(jnp.asarray(xs)))
+    worst = int(np.argmax(defects))
+    poisson_ok = bool(defects[worst] <= POISSON_TOL)
+
+    # ---- measured order
+    t_end = args.t_end
+    try:
+        axis = symmetry_axis(body)
+    except InputError:
+        axis = None
+    standard = (np.allclose(args.inertia, STANDARD_CASE.inertia, rtol=1e-15, atol=0)
+                and np.allclose(args.m0, STANDARD_CASE.m0, rtol=1e-15, atol=0) and t_end == STANDARD_CASE.t_end)
+    if axis is not None:
+        reference, ref_kind, ref_acc = symmetric_solution(body, m0, t_end, axis=axis), "exact (symmetric body)", 0.0
+    elif standard:
+        reference, ref_kind, ref_acc = jnp.asarray(STANDARD_CASE.reference), "30-digit (standard case)", 1e-16
+    else:
+        from .._sweep import reference_solution
+
+        ref, acc = reference_solution(np.asarray(m0)[None], np.asarray(args.inertia, dtype=float)[None], t_end)
+        reference, ref_kind, ref_acc = jnp.asarray(ref[0]), "kahan-li-8, Casimir split, step halving", float(acc[0])
+    start = args.start or LADDER_START[max(k for k in LADDER_START if k <= max(1, min(scheme.order, 10)))]
+    counts = ladder(start)
+    hs, errs = global_errors(step, m0, t_end, counts, reference)
+    order_fit, note = None, ""
+    try:
+        order_fit = fit_order(hs, errs)
+    except InputError:
+        if np.nanmax(errs) < ORDER_WINDOW[0]:
+            note = (f"all errors are at round-off (max {np.nanmax(errs):.1e}): the splitting is exact for "
+                    "this body, so no order can be measured")
+        else:
+            note = (f"too few errors inside the fit window {ORDER_WINDOW} (errors {errs.min():.1e} .. "
+                    f"{errs.max():.1e}); try another --start")
+    order_ok = order_fit is not None and abs(order_fit.order - scheme.order) <= ORDER_TOL
+    exact_split = order_fit is None and np.nanmax(errs) < ORDER_WINDOW[0]
+
+    result = {
+        "scheme": scheme.name, "nominal_order": scheme.order, "split": args.split,
+        "shift_axis": shift if args.split == "casimir" else None,
+        "inertia": list(args.inertia), "m0": list(args.m0),
+        "poisson_defect_max": float(defects[worst]), "poisson_defect_median": float(np.median(defects)),
+        "poisson_worst_state": xs[worst], "poisson_dt": args.dt, "poisson_states": args.states,
+        "poisson_ok": poisson_ok,
+        "measured_order": None if order_fit is None else order_fit.order,
+        "order_points_used": None if order_fit is None else int(order_fit.used.sum()),
+        "order_ok": bool(order_ok or exact_split), "order_note": note or None,
+        "t_end": t_end, "step_counts": list(counts), "step_sizes": hs, "errors": errs,
+        "reference": ref_kind, "reference_accuracy": ref_acc,
+    }
+    if args.json:
+        c.print_json(result)
+    else:
+        print(f"jaxsplit check: {scheme.name} (nominal order {scheme.order}), {args.split} split"
+              + (f" (shift axis {shift})" if args.split == "casimir" else "")
+              + f", I = ({c.fmt_vec(args.inertia)})")
+        print(f"  Poisson defect, h = {args.dt:g}, {args.states} random unit states: max {defects[worst]:.2e} "
+              f"(median {np.median(defects):.2e}) -> {'Poisson to round-off' if poisson_ok else 'NOT Poisson'} "
+              f"(tolerance {POISSON_TOL:g})")
+        if order_fit is not None:
+            print(f"  measured order {order_fit.order:.3f} from {int(order_fit.used.sum())} of {len(counts)} step "
+                  f"counts ({counts[0]}..{counts[-1]}) to t = {t_end:g} -> "
+                  f"{'agrees' if order_ok else 'DISAGREES'} (tolerance {ORDER_TOL})")
+        else:
+            print(f"  order: {note}")
+        print(f"  reference: {ref_kind}" + (f", accuracy {ref_acc:.1e}" if ref_acc else ""))
+    return c.EXIT_OK if (poisson_ok and (order_ok or exact_split)) else EXIT_FAILED
