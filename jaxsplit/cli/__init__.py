@@ -14,15 +14,10 @@ from .._errors import InputError
 
 COMMANDS = ("simulate", "schemes", "check", "sweep", "fit", "paper")
 
-EPILOG = """\
-commands:
-  simulate   integrate a body, write the trajectory (.npz/.csv) and a figure, print a summary
-  schemes    the table of composition schemes
-  check      Poisson defect and measured order of a scheme on a body
-  sweep      many cases in resumable chunks (--resume after Ctrl-C or a kill)
-  fit        fit models to sweep results
-  paper      reproduce the seed paper's figures and tables
+DESCRIPTION = ("jaxsplit: structure-preserving (Poisson / symplectic) splitting integrators for the "
+               "free rigid body, in JAX.")
 
+EPILOG = """\
 examples:
   jaxsplit simulate                       # the paper's symmetric body with Lie-Trotter
   jaxsplit schemes
@@ -61,7 +56,7 @@ def _load(name):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="jaxsplit", description=__doc__.splitlines()[0], epilog=EPILOG,
+    parser = _Parser(prog="jaxsplit", description=DESCRIPTION, epilog=EPILOG,
                      formatter_class=argparse.RawDescriptionHelpFormatter)
     from .. import __version__
 

@@ -9,6 +9,7 @@ anything) unless ``--out`` names them or ``--no-save`` is given.
 
 import argparse
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -108,6 +109,8 @@ def _output_paths(args, when: str):
             return None, None, c.check_output(args.figure, args.force, "figure")
         return _default_outputs(args, when)
     out = Path(args.out).expanduser()
+    if args.out.endswith(("/", os.sep)) or out.is_dir():
+        raise InputError(f"--out {args.out!r} is a directory; give a file name such as {str(out / 'run.npz')!r}")
     suffix = out.suffix.lower().lstrip(".")
     if suffix in FORMATS:
         fmt = suffix
@@ -176,6 +179,10 @@ def run(args):
     if args.shift_axis is not None and args.split != "casimir":
         raise InputError("--shift-axis applies only with --split casimir")
     shift = "auto" if args.shift_axis in (None, "auto") else int(args.shift_axis)
+    if args.split == "casimir" and shift == "auto":
+        from .._splitting import auto_shift_axis
+
+        shift = auto_shift_axis(body) + 1
     n_steps = _steps(args)
     save_every = args.save_every
     n_saved = n_steps // save_every + 2
