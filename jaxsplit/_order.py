@@ -58,3 +58,28 @@ def global_errors(step, x0, t_end: float, counts, reference):
 def ladder(start: int, factor: float = 16.0, points: int = 12):
     """Step counts growing geometrically from ``start`` by ``factor`` overall."""
     return sorted({int(round(start * factor ** (k / (points - 1)))) for k in range(points)})
+
+
+def estimate_order(step, x0, t_end: float, counts, reference=None, *, reference_step=None,
+                   reference_count: int | None = None, window=ORDER_WINDOW) -> OrderFit:
+    """Empirical order of ``step`` at ``t_end`` over the step-count ladder ``counts``.
+
+    ``reference`` is the exact state at ``t_end`` (an array or PyTree), or a callable
+    ``reference(t_end)`` (an exact solution), or ``None``: then a tight reference
+    integration is made with ``reference_step`` (default: ``step`` itself) and
+    ``reference_count`` steps (default: 16 × the largest count; pass a higher-order
+    ``reference_step`` when ``step`` is of low order). The errors are max-norm global
+    errors (``global_errors``, one compile) and the order is their log-log slope inside
+    ``window`` (``fit_order``).
+    """
+    if reference is None:
+        reference_step = step if reference_step is None else reference_step
+        n_ref = 16 * max(int(n) for n in counts) if reference_count is None else int(reference_count)
+        if n_ref < 1:
+            raise InputError(f"reference_count must be >= 1, got {reference_count!r}")
+        dtype = jnp.result_type(*jax.tree_util.tree_leaves(x0))
+        reference = integrate(reference_step, x0, jnp.asarray(t_end / n_ref, dtype=dtype), n_ref)
+    elif callable(reference):
+        reference = reference(t_end)
+    hs, errors = global_errors(step, x0, t_end, counts, reference)
+    return fit_order(hs, errors, window)

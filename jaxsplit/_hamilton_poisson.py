@@ -1,0 +1,160 @@
+"""Hamilton–Poisson systems on Rⁿ: ẋ = Π(x) ∇H(x), with ∇H by ``jax.grad``.
+
+A system is two pure functions of the state x ∈ Rⁿ: the Poisson matrix Π(x) (n × n,
+skew, satisfying the Jacobi identity) and the Hamiltonian H(x), plus optional named
+Casimirs / first integrals for the invariant monitors. Parameters that should be traced
+(swept by ``vmap``, differentiated by ``grad``) are passed by making the functions
+``jax.tree_util.Partial`` objects: their bound arguments are PyTree leaves.
+
+Instances from the seed paper:
+
+* ``rigid_body_system(inertia)`` — so(3)*, Π(m) = hat(m), H = ½ Σ m_i²/I_i, C = ½|m|²;
+* ``harmonic_oscillator()`` — Example 2.1, x = (q, p), Π = J = [[0, 1], [−1, 0]],
+  H = ½(q² + p²);
+* ``example_3_1(A, B, C)`` — Example 3.1, Π(x) = [[0, x₂], [−x₂, 0]] (NOT constant),
+  H = A x₁ + B x₂ + C, so ẋ = (B x₂, −A x₂): a linear vector field;
+* ``canonical_system(hamiltonian, dim)`` and ``constant_poisson_system(matrix, hamiltonian)``
+  for Propositions 2.1–3.2 (any H, constant Π).
+"""
+
+import dataclasses
+from collections.abc import Callable
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._errors import InputError
+from ._rotations import hat
+from ._body import RigidBody
+
+Partial = jax.tree_util.Partial
+
+
+@jax.tree_util.register_pytree_node_class
+@dataclasses.dataclass(frozen=True)
+class HamiltonPoisson:
+    """A Hamilton–Poisson system (Rⁿ, Π, H); ``vector_field(x) = Π(x) ∇H(x)``.
+
+    ``invariants`` maps names to functions x -> scalar that the flow conserves (H is
+    always monitored as ``"energy"``); they are used by ``monitor_invariants``.
+    """
+
+    poisson_matrix: Callable
+    hamiltonian: Callable
+    invariants: tuple = ()  # ((name, function), ...)
+    name: str = "hamilton-poisson"
+
+    def __post_init__(self):
+        if not callable(self.poisson_matrix) or not callable(self.hamiltonian):
+            raise InputError("HamiltonPoisson needs callables poisson_matrix(x) and hamiltonian(x)")
+        inv = tuple(self.invariants.items()) if isinstance(self.invariants, dict) else tuple(self.invariants)
+        for item in inv:
+            if not (isinstance(item, tuple) and len(item) == 2 and isinstance(item[0], str) and callable(item[1])):
+                raise InputError(f"invariants must be (name, function) pairs, got {item!r}")
+        object.__setattr__(self, "invariants", inv)
+
+    def gradient(self, x):
+        return jax.grad(self.hamiltonian)(x)
+
+    def vector_field(self, x):
+        """ẋ = Π(x) ∇H(x)."""
+        return self.poisson_matrix(x) @ self.gradient(x)
+
+    def bracket(self, f, g, x):
+        """{f, g}(x) = ∇f(x)ᵀ Π(x) ∇g(x)."""
+        return jax.grad(f)(x) @ self.poisson_matrix(x) @ jax.grad(g)(x)
+
+    def monitored(self) -> tuple:
+        """(name, function) pairs: the energy first, then the declared invariants."""
+        return (("energy", self.hamiltonian),) + self.invariants
+
+    def tree_flatten(self):
+        names = tuple(n for n, _ in self.invariants)
+        return (self.poisson_matrix, self.hamiltonian, tuple(f for _, f in self.invariants)), (names, self.name)
+
+    @classmethod
+    def tree_unflatten(cls, aux, children):
+        names, name = aux
+        obj = object.__new__(cls)
+        object.__setattr__(obj, "poisson_matrix", children[0])
+        object.__setattr__(obj, "hamiltonian", children[1])
+        object.__setattr__(obj, "invariants", tuple(zip(names, children[2])))
+        object.__setattr__(obj, "name", name)
+        return obj
+
+
+# ---------------------------------------------------------------- the rigid body
+def _rb_energy(inertia, m):
+    return 0.5 * jnp.sum(m * m / jnp.asarray(inertia, dtype=m.dtype))
+
+
+def _half_square(x):
+    return 0.5 * jnp.sum(x * x)
+
+
+def rigid_body_system(inertia) -> HamiltonPoisson:
+    """The free rigid body on so(3)* (``inertia`` or a ``RigidBody``), Casimir C = ½|m|²."""
+    body = inertia if isinstance(inertia, RigidBody) else RigidBody(inertia)
+    return HamiltonPoisson(hat, Partial(_rb_energy, body.inertia), (("casimir", _half_square),),
+                           "rigid-body")
+
+
+# ---------------------------------------------------------------- canonical systems
+def canonical_matrix(dim: int, dtype=None):
+    """J = [[0, I], [−I, 0]] for x = (q, p) ∈ R^{2m}."""
+    if not (isinstance(dim, (int, np.integer)) and dim >= 2 and dim % 2 == 0):
+        raise InputError(f"a canonical system needs an even dimension >= 2, got {dim!r}")
+    m = dim // 2
+    eye, zero = jnp.eye(m, dtype=dtype), jnp.zeros((m, m), dtype=dtype)
+    return jnp.block([[zero, eye], [-eye, zero]])
+
+
+def _canonical_pi(dim, x):
+    return canonical_matrix(int(dim), x.dtype)
+
+
+def canonical_system(hamiltonian: Callable, dim: int, name: str = "canonical") -> HamiltonPoisson:
+    """(R^{2m}, J, H) with x = (q, p): q̇ = ∂H/∂p, ṗ = −∂H/∂q."""
+    canonical_matrix(dim)  # validates dim
+    return HamiltonPoisson(Partial(_canonical_pi, dim), hamiltonian, (), name)
+
+
+def _constant_pi(matrix, x):
+    return jnp.asarray(matrix, dtype=x.dtype)
+
+
+def constant_poisson_system(matrix, hamiltonian: Callable, name: str = "constant-poisson") -> HamiltonPoisson:
+    """(Rⁿ, Π, H) with a constant skew matrix Π (any constant skew matrix is Poisson)."""
+    mat = np.asarray(matrix, dtype=float)
+    if mat.ndim != 2 or mat.shape[0] != mat.shape[1] or not np.allclose(mat, -mat.T, atol=0):
+        raise InputError(f"a constant Poisson matrix must be square and skew, got {mat.tolist()}")
+    return HamiltonPoisson(Partial(_constant_pi, jnp.asarray(mat)), hamiltonian, (), name)
+
+
+def _oscillator_energy(x):
+    return 0.5 * (x[0] ** 2 + x[1] ** 2)
+
+
+def harmonic_oscillator() -> HamiltonPoisson:
+    """Example 2.1: x = (q, p), H = ½(q² + p²), ω = dp ∧ dq, q̇ = p, ṗ = −q."""
+    return canonical_system(_oscillator_energy, 2, "harmonic-oscillator")
+
+
+# ---------------------------------------------------------------- Example 3.1
+def _ex31_pi(x):
+    z = jnp.zeros_like(x[1])
+    return jnp.stack([jnp.stack([z, x[1]]), jnp.stack([-x[1], z])])
+
+
+def _ex31_energy(coefficients, x):
+    a, b, c = coefficients
+    return a * x[0] + b * x[1] + c
+
+
+def example_3_1(a=1.0, b=1.0, c=0.0) -> HamiltonPoisson:
+    """Example 3.1: Π(x) = [[0, x₂], [−x₂, 0]], H = A x₁ + B x₂ + C, ẋ = (B x₂, −A x₂)."""
+    coefficients = jnp.asarray([a, b, c])
+    if not bool(jnp.all(jnp.isfinite(coefficients))):
+        raise InputError(f"A, B, C must be finite, got {(a, b, c)}")
+    return HamiltonPoisson(_ex31_pi, Partial(_ex31_energy, coefficients), (), "example-3.1")

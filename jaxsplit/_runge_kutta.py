@@ -1,0 +1,338 @@
+"""The seed paper's classical integrators (§2): Runge–Kutta methods from Butcher tableaus.
+
+An s-stage method (2.3) with tableau (A, b, c) advances ẋ = f(x) by
+
+    K_i = f(x_n + h Σ_j a_ij K_j),   x_{n+1} = x_n + h Σ_i b_i K_i.
+
+Explicit tableaus (strictly lower-triangular A) are evaluated stage by stage. Implicit
+ones solve the s·n stage equations G(K) = K − f(x + h (A ⊗ I) K) = 0 by Newton's method
+with the full Jacobian from ``jax.jacfwd``, inside ``lax.while_loop``, until the Newton
+increment reaches round-off (or stops decreasing). The solve is wrapped in
+``lax.custom_root``, so derivatives (forward and reverse) come from the implicit function
+theorem rather than from differentiating the iteration: the steps jit, vmap and
+differentiate.
+
+Named tableaus (Hairer–Nørsett–Wanner I, Hairer–Wanner II, Hairer–Lubich–Wanner GNI):
+explicit Euler (2.4); the trapezoidal rule — the paper's "modified Euler" (2.5) printed as
+(x_{n+1} − x_n)/h = f(x_n) + f(x_{n+1}) has no ½ and is then inconsistent (it approximates
+the flow over 2h), so the consistent method (with ½) is implemented and the printed one
+is kept as ``tableaus["modified-euler-as-printed"]`` (order 0) for the audit; implicit
+midpoint = Gauss–Legendre 1 (2.2); Gauss–Legendre 2, 3 (and any s by collocation); classical
+RK4; implicit Euler, Radau IIA (2 stages), Lobatto IIIA (3 stages); and a 2-stage DIRK
+(two implicit midpoint half steps) that satisfies (2.7) without being Gauss–Legendre.
+
+The Ruth integrator (2.6) of Example 2.1 is symplectic Euler for a separable H = T(p) + V(q):
+q_{n+1} = q_n + h ∇T(p_n), p_{n+1} = p_n − h ∇V(q_{n+1}).
+"""
+
+import dataclasses
+import math
+from collections.abc import Callable
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._errors import InputError
+from ._tableau_checks import ORDER_TOL, order_conditions
+
+_ROW_SUM_TOL = 1e-14
+
+
+def _tuple2(a):
+    return tuple(tuple(float(v) for v in row) for row in a)
+
+
+@dataclasses.dataclass(frozen=True)
+class ButcherTableau:
+    """A Runge–Kutta tableau: frozen, hashable, validated when built.
+
+    ``order`` is the declared classical order; it is verified against the Butcher
+    order conditions (all rooted trees up to that order) in ``__post_init__``, and
+    ``c`` must equal the row sums of ``A``. ``order=0`` marks an inconsistent method
+    (kept only to study it).
+    """
+
+    name: str
+    a: tuple
+    b: tuple
+    order: int
+    c: tuple | None = None
+    citation: str = ""
+
+    def __post_init__(self):
+        try:
+            a = np.asarray(self.a, dtype=float)
+            b = np.asarray(self.b, dtype=float)
+        except (TypeError, ValueError) as err:
+            raise InputError(f"tableau {self.name!r}: A and b must be numeric, got {self.a!r}, {self.b!r}") from err
+        s = b.shape[0] if b.ndim == 1 else -1
+        if s < 1 or a.shape != (s, s):
+            raise InputError(f"tableau {self.name!r}: A must be s x s and b of length s, got {a.shape}, {b.shape}")
+        if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+            raise InputError(f"tableau {self.name!r}: coefficients must be finite")
+        row_sums = a.sum(axis=1)
+        c = row_sums if self.c is None else np.asarray(self.c, dtype=float)
+        if c.shape != (s,) or np.max(np.abs(c - row_sums)) > _ROW_SUM_TOL * max(1.0, np.max(np.abs(a))):
+            raise InputError(f"tableau {self.name!r}: c must equal the row sums of A {row_sums.tolist()}, got {c.tolist()}")
+        if isinstance(self.order, bool) or not isinstance(self.order, int) or self.order < 0:
+            raise InputError(f"tableau {self.name!r}: order must be an integer >= 0, got {self.order!r}")
+        object.__setattr__(self, "a", _tuple2(a))
+        object.__setattr__(self, "b", tuple(float(v) for v in b))
+        object.__setattr__(self, "c", tuple(float(v) for v in c))
+        bad = [cond for cond in order_conditions((a, b), self.order) if abs(cond.residual) > ORDER_TOL]
+        if bad:
+            raise InputError(
+                f"tableau {self.name!r}: declared order {self.order} but the condition for tree {bad[0].tree} "
+                f"has residual {bad[0].residual:.3g}"
+            )
+
+    @property
+    def stages(self) -> int:
+        return len(self.b)
+
+    @property
+    def explicit(self) -> bool:
+        return all(self.a[i][j] == 0.0 for i in range(self.stages) for j in range(i, self.stages))
+
+
+def _gauss_collocation(s: int):
+    """Gauss–Legendre collocation coefficients for any s (NumPy, float64)."""
+    x, _ = np.polynomial.legendre.leggauss(s)
+    c = (x + 1) / 2
+    v = np.vander(c, s, increasing=True).T  # v[k, j] = c_j^k
+    k = np.arange(1, s + 1)
+    b = np.linalg.solve(v, 1.0 / k)
+    a = np.linalg.solve(v, (c[None, :] ** k[:, None] / k[:, None])).T
+    return a, b
+
+
+_S3, _S15 = math.sqrt(3.0), math.sqrt(15.0)
+
+_GAUSS = {
+    1: ((( 0.5,),), (1.0,)),
+    2: (((0.25, 0.25 - _S3 / 6), (0.25 + _S3 / 6, 0.25)), (0.5, 0.5)),
+    3: (((5 / 36, 2 / 9 - _S15 / 15, 5 / 36 - _S15 / 30),
+         (5 / 36 + _S15 / 24, 2 / 9, 5 / 36 - _S15 / 24),
+         (5 / 36 + _S15 / 30, 2 / 9 + _S15 / 15, 5 / 36)), (5 / 18, 4 / 9, 5 / 18)),
+}
+
+
+def gauss_legendre_tableau(stages: int) -> ButcherTableau:
+    """The s-stage Gauss–Legendre method, order 2s (closed forms for s <= 3)."""
+    if isinstance(stages, bool) or not isinstance(stages, (int, np.integer)) or not 1 <= stages <= 8:
+        raise InputError(f"Gauss-Legendre stages must be an integer in 1..8, got {stages!r}")
+    stages = int(stages)
+    a, b = _GAUSS[stages] if stages in _GAUSS else _gauss_collocation(stages)
+    name = "implicit-midpoint" if stages == 1 else f"gauss-legendre-{stages}"
+    return ButcherTableau(name, a, b, 2 * stages, citation="Butcher 1964; HNW I Table 7.4; seed paper (2.2) for s = 1")
+
+
+tableaus: dict[str, ButcherTableau] = {
+    t.name: t
+    for t in (
+        ButcherTableau("explicit-euler", ((0.0,),), (1.0,), 1, citation="seed paper (2.4)"),
+        ButcherTableau("implicit-euler", ((1.0,),), (1.0,), 1, citation="HW II IV.5"),
+        ButcherTableau("trapezoid", ((0.0, 0.0), (0.5, 0.5)), (0.5, 0.5), 2,
+                       citation="Lobatto IIIA-2; the seed paper's 'modified Euler' (2.5) with its missing 1/2"),
+        ButcherTableau("modified-euler-as-printed", ((0.0, 0.0), (1.0, 1.0)), (1.0, 1.0), 0,
+                       citation="seed paper (2.5) exactly as printed (inconsistent: sum b = 2)"),
+        gauss_legendre_tableau(1),
+        gauss_legendre_tableau(2),
+        gauss_legendre_tableau(3),
+        ButcherTableau("rk4", ((0, 0, 0, 0), (0.5, 0, 0, 0), (0, 0.5, 0, 0), (0, 0, 1, 0)),
+                       (1 / 6, 1 / 3, 1 / 3, 1 / 6), 4, citation="Kutta 1901, classical RK4"),
+        ButcherTableau("radau-iia-2", ((5 / 12, -1 / 12), (0.75, 0.25)), (0.75, 0.25), 3,
+                       citation="Ehle 1969; HW II Table 5.5"),
+        ButcherTableau("lobatto-iiia-3", ((0, 0, 0), (5 / 24, 1 / 3, -1 / 24), (1 / 6, 2 / 3, 1 / 6)),
+                       (1 / 6, 2 / 3, 1 / 6), 4, citation="Ehle 1969; HW II Table 5.7"),
+        ButcherTableau("midpoint-composition-2", ((0.25, 0.0), (0.5, 0.25)), (0.5, 0.5), 2,
+                       citation="two implicit-midpoint half steps as one DIRK; satisfies (2.7)"),
+    )
+}
+
+
+# ------------------------------------------------------------------ the stepper
+def _field(system) -> Callable:
+    if hasattr(system, "vector_field"):
+        return system.vector_field
+    if callable(system):
+        return system
+    raise InputError(f"system must have a vector_field(x) method or be a function f(x), got {type(system).__name__}")
+
+
+class NewtonInfo(NamedTuple):
+    """Diagnostics of one stage solve: Newton iterations, max|G(K)|, last max|ΔK|."""
+
+    iterations: jax.Array
+    residual: jax.Array
+    increment: jax.Array
+
+
+def _newton(g, z0, max_iter: int):
+    """Full Newton on g(z) = 0 until the increment is at round-off or stops decreasing."""
+    eps = jnp.finfo(z0.dtype).eps
+    inf = jnp.asarray(jnp.inf, z0.dtype)
+
+    def cond(state):
+        z, dz, dz_prev, it = state
+        scale = jnp.max(jnp.abs(z)) + jnp.finfo(z.dtype).tiny
+        converged = dz <= 4 * eps * scale
+        stalled = (it >= 3) & (dz >= dz_prev)
+        return (it < max_iter) & ~converged & ~stalled
+
+    def body(state):
+        z, dz, _, it = state
+        step = jnp.linalg.solve(jax.jacfwd(g)(z), -g(z))
+        return z + step, jnp.max(jnp.abs(step)), dz, it + 1
+
+    z, dz, _, it = jax.lax.while_loop(cond, body, (z0, inf, inf, jnp.asarray(0)))
+    return z, it, dz
+
+
+def _tangent_solve(g, y):
+    return jnp.linalg.solve(jax.jacfwd(g)(y), y)
+
+
+@jax.tree_util.register_pytree_node_class
+@dataclasses.dataclass(frozen=True)
+class RungeKutta:
+    """One step ``step(x, h)`` of the tableau on ``system`` (a PyTree: parameters trace)."""
+
+    system: object
+    tableau: ButcherTableau
+    max_iter: int = 50
+
+    def _setup(self, x, h):
+        if not hasattr(x, "ndim") or x.ndim != 1:
+            raise InputError(f"Runge-Kutta states must be vectors in R^n, got shape {getattr(x, 'shape', None)}")
+        dtype = x.dtype
+        a = jnp.asarray(self.tableau.a, dtype=dtype)
+        b = jnp.asarray(self.tableau.b, dtype=dtype)
+        return a, b, jnp.asarray(h, dtype=dtype)
+
+    def _residual(self, x, h, a):
+        f = _field(self.system)
+        s, n = self.tableau.stages, x.shape[0]
+
+        def g(z):
+            k = z.reshape(s, n)
+            stages = x[None, :] + h * (a @ k)
+            return (k - jax.vmap(f)(stages)).reshape(-1)
+
+        return g
+
+    def stage_derivatives(self, x, h):
+        """The K_i (shape (s, n)) of one step from ``x``."""
+        x = jnp.asarray(x)
+        a, _, h = self._setup(x, h)
+        f = _field(self.system)
+        s, n = self.tableau.stages, x.shape[0]
+        if self.tableau.explicit:
+            ks = []
+            for i in range(s):
+                y = x
+                for j in range(i):
+                    if self.tableau.a[i][j] != 0.0:
+                        y = y + (h * a[i, j]) * ks[j]
+                ks.append(f(y))
+            return jnp.stack(ks)
+        g = self._residual(x, h, a)
+        z0 = jnp.tile(f(x), s)
+        z = jax.lax.custom_root(g, z0, lambda g_, z_: _newton(g_, z_, self.max_iter)[0], _tangent_solve)
+        return z.reshape(s, n)
+
+    def newton_info(self, x, h) -> NewtonInfo:
+        """Iterations, final residual max|G(K)| and last increment of the stage solve."""
+        x = jnp.asarray(x)
+        a, _, h = self._setup(x, h)
+        g = self._residual(x, h, a)
+        if self.tableau.explicit:
+            z = self.stage_derivatives(x, h).reshape(-1)
+            return NewtonInfo(jnp.asarray(0), jnp.max(jnp.abs(g(z))), jnp.asarray(0.0, x.dtype))
+        z, it, dz = _newton(g, jnp.tile(_field(self.system)(x), self.tableau.stages), self.max_iter)
+        return NewtonInfo(it, jnp.max(jnp.abs(g(z))), dz)
+
+    def __call__(self, x, h):
+        x = jnp.asarray(x)
+        _, b, h = self._setup(x, h)
+        k = self.stage_derivatives(x, h)
+        return x + h * (b @ k)
+
+    def tree_flatten(self):
+        return (self.system,), (self.tableau, self.max_iter)
+
+    @classmethod
+    def tree_unflatten(cls, aux, children):
+        return cls(children[0], *aux)
+
+
+def runge_kutta(system, tableau: "ButcherTableau | str", *, max_iter: int = 50) -> RungeKutta:
+    """The Runge–Kutta step (2.3) of ``tableau`` (a ``ButcherTableau`` or a name in ``tableaus``)
+    for ``system`` (a ``HamiltonPoisson``, a ``RigidBody``, or any f(x) -> ẋ)."""
+    if isinstance(tableau, str):
+        if tableau not in tableaus:
+            raise InputError(f"unknown tableau {tableau!r}; known: {', '.join(tableaus)}")
+        tableau = tableaus[tableau]
+    if not isinstance(tableau, ButcherTableau):
+        raise InputError(f"tableau must be a ButcherTableau or a name, got {type(tableau).__name__}")
+    if isinstance(max_iter, bool) or not isinstance(max_iter, int) or max_iter < 1:
+        raise InputError(f"max_iter must be a positive integer, got {max_iter!r}")
+    _field(system)
+    return RungeKutta(system, tableau, max_iter)
+
+
+def explicit_euler(system) -> RungeKutta:
+    """(2.4): x_{n+1} = x_n + h f(x_n)."""
+    return runge_kutta(system, "explicit-euler")
+
+
+def trapezoid(system) -> RungeKutta:
+    """The trapezoidal rule x_{n+1} = x_n + h/2 (f(x_n) + f(x_{n+1})): the consistent form of (2.5)."""
+    return runge_kutta(system, "trapezoid")
+
+
+def gauss_legendre(system, stages: int = 1) -> RungeKutta:
+    """Gauss–Legendre with ``stages`` stages (order 2s); s = 1 is the implicit midpoint rule (2.2)."""
+    return runge_kutta(system, gauss_legendre_tableau(stages))
+
+
+def rk4(system) -> RungeKutta:
+    """The classical fourth-order Runge–Kutta method."""
+    return runge_kutta(system, "rk4")
+
+
+# ------------------------------------------------------------------ Ruth (2.6)
+def _half_square(v):
+    return 0.5 * jnp.sum(v * v)
+
+
+@dataclasses.dataclass(frozen=True)
+class Ruth:
+    """Ruth's first-order symplectic map (2.6) for H = T(p) + V(q), state x = (q, p).
+
+    q_{n+1} = q_n + h ∇T(p_n),  p_{n+1} = p_n − h ∇V(q_{n+1}). With T = V = ½|·|² this is
+    exactly (2.6): x¹ ← x¹ + h x², x² ← −h x¹ + (1 − h²) x².
+    """
+
+    potential: Callable = _half_square
+    kinetic: Callable = _half_square
+
+    def __call__(self, x, h):
+        x = jnp.asarray(x)
+        if x.ndim != 1 or x.shape[0] % 2:
+            raise InputError(f"the Ruth map acts on x = (q, p) of even length, got shape {x.shape}")
+        h = jnp.asarray(h, dtype=x.dtype)
+        m = x.shape[0] // 2
+        q, p = x[:m], x[m:]
+        q = q + h * jax.grad(self.kinetic)(p)
+        p = p - h * jax.grad(self.potential)(q)
+        return jnp.concatenate([q, p])
+
+
+def ruth(potential: Callable = _half_square, kinetic: Callable = _half_square) -> Ruth:
+    """The Ruth integrator (2.6); defaults give Example 2.1's harmonic oscillator."""
+    if not callable(potential) or not callable(kinetic):
+        raise InputError("ruth needs callables potential(q) and kinetic(p)")
+    return Ruth(potential, kinetic)
