@@ -93,7 +93,9 @@ def _sphere_panel(ax, m, inertia, radius):
 def _error_panel(ax, t, err, label, color):
     if len(t) > 1:  # the error at t = 0 is zero by definition
         t, err = t[1:], err[1:]
-    shown = np.maximum(np.abs(err), _FLOOR)
+    with np.errstate(invalid="ignore", over="ignore"):
+        shown = np.maximum(np.abs(err), _FLOOR)
+    shown = np.where(np.isfinite(shown) & (shown < 1e100), shown, np.nan)  # drawable values only
     ax.semilogy(t, shown, color=color, lw=1.0)
     ax.set_ylabel(label, fontsize=9)
     ax.grid(True, which="major", alpha=0.4)
@@ -101,7 +103,7 @@ def _error_panel(ax, t, err, label, color):
     if finite.size:
         top = finite.max()
         ax.set_ylim(max(_FLOOR / 2, min(finite.min(), top / 10) / 3), top * 3)
-        ax.text(0.99, 0.04, f"max {np.max(np.abs(err)):.2e}", transform=ax.transAxes,
+        ax.text(0.99, 0.04, f"max {np.nanmax(np.abs(err)):.2e}", transform=ax.transAxes,
                 ha="right", va="bottom", fontsize=8, color="0.25",
                 bbox=dict(facecolor="white", edgecolor="none", alpha=0.8, pad=1))
 
@@ -116,7 +118,9 @@ def simulate_figure(t, m, energy_error, casimir_error, inertia, *, title="", exa
     fig = plt.figure(figsize=(12, 5.6), dpi=110)
     grid = fig.add_gridspec(rows, 2, width_ratios=(1, 1.25), wspace=0.12, hspace=0.12)
     radius = float(np.linalg.norm(m[0])) or 1.0
-    _sphere_panel(fig.add_subplot(grid[:, 0]), m, inertia, radius)
+    with np.errstate(over="ignore", invalid="ignore"):  # a blown-up run: draw its sane part
+        sane = np.all(np.isfinite(m), axis=1) & (np.max(np.abs(m), axis=1) <= 1e3 * radius)
+    _sphere_panel(fig.add_subplot(grid[:, 0]), m[sane] if sane.any() else m[:1], inertia, radius)
     panels = [(energy_error, "|H/H\u2080 \u2212 1|\nenergy error", "tab:orange"),
               (casimir_error, "|C/C\u2080 \u2212 1|\nCasimir error", "tab:purple")]
     if exact_error is not None:

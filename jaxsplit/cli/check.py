@@ -73,12 +73,41 @@ def _poisson_defect_fn():
     return poisson_defect
 
 
+MAX_COUNT = 2**17  # largest step count of an adapted ladder (12 x 2^17 saved states ~ 38 MB)
+
+
+def _measure_order(step, m0, t_end, reference, start, adapt=True):
+    """Fit the order over ``ladder(start)``; when the errors miss the fit window, move the
+    ladder (x16 or /16, at most twice) towards it. Returns (fit or None, note, counts, hs, errs)."""
+    from .._order import fit_order, global_errors, ladder
+
+    tried = set()
+    while True:
+        tried.add(start)
+        counts = ladder(start)
+        hs, errs = global_errors(step, m0, t_end, counts, reference)
+        try:
+            return fit_order(hs, errs), "", counts, hs, errs
+        except InputError:
+            pass
+        finite = errs[np.isfinite(errs)]
+        if finite.size and finite.max() < ORDER_WINDOW[0]:
+            return None, (f"all errors are at round-off (max {finite.max():.1e}): the splitting is exact "
+                          "for this body, so no order can be measured"), counts, hs, errs
+        too_big = not finite.size or np.median(finite) > ORDER_WINDOW[1]
+        nxt = start * 16 if too_big else max(1, start // 16)
+        if not adapt or nxt in tried or len(tried) >= 3 or nxt * 16 > MAX_COUNT:
+            return None, (f"too few errors inside the fit window {ORDER_WINDOW} (errors "
+                          f"{np.nanmin(errs):.1e} .. {np.nanmax(errs):.1e} for step counts {counts[0]}.."
+                          f"{counts[-1]}); try another --start or --t-end"), counts, hs, errs
+        start = nxt
+
+
 def run(args):
     import jax
     import jax.numpy as jnp
 
     from .._exact import symmetric_solution, symmetry_axis
-    from .._order import fit_order, global_errors, ladder
     from .._schemes import schemes
     from .._splitting import auto_shift_axis, splitting
 
@@ -125,20 +154,9 @@ def run(args):
         ref, acc = reference_solution(np.asarray(m0)[None], np.asarray(args.inertia, dtype=float)[None], t_end)
         reference, ref_kind, ref_acc = jnp.asarray(ref[0]), "kahan-li-8, Casimir split, step halving", float(acc[0])
     start = args.start or LADDER_START[max(k for k in LADDER_START if k <= max(1, min(scheme.order, 10)))]
-    counts = ladder(start)
-    hs, errs = global_errors(step, m0, t_end, counts, reference)
-    order_fit, note = None, ""
-    try:
-        order_fit = fit_order(hs, errs)
-    except InputError:
-        if np.nanmax(errs) < ORDER_WINDOW[0]:
-            note = (f"all errors are at round-off (max {np.nanmax(errs):.1e}): the splitting is exact for "
-                    "this body, so no order can be measured")
-        else:
-            note = (f"too few errors inside the fit window {ORDER_WINDOW} (errors {errs.min():.1e} .. "
-                    f"{errs.max():.1e}); try another --start")
+    order_fit, note, counts, hs, errs = _measure_order(step, m0, t_end, reference, start, adapt=args.start is None)
     order_ok = order_fit is not None and abs(order_fit.order - scheme.order) <= ORDER_TOL
-    exact_split = order_fit is None and np.nanmax(errs) < ORDER_WINDOW[0]
+    exact_split = order_fit is None and bool(np.nanmax(errs) < ORDER_WINDOW[0])
 
     result = {
         "scheme": scheme.name, "nominal_order": scheme.order, "split": args.split,

@@ -207,13 +207,14 @@ def run(args):
     m = result.x
     t = result.steps * args.dt
     inverse = 1 / np.asarray(args.inertia)
-    energy = 0.5 * np.sum(m * m * inverse, axis=1)
-    casimir = 0.5 * np.sum(m * m, axis=1)
 
     def relative(values):
         return values / values[0] - 1 if values[0] != 0 else values - values[0]
 
-    energy_error, casimir_error = relative(energy), relative(casimir)
+    with np.errstate(over="ignore", invalid="ignore"):  # a blown-up run may overflow here
+        energy = 0.5 * np.sum(m * m * inverse, axis=1)
+        casimir = 0.5 * np.sum(m * m, axis=1)
+        energy_error, casimir_error = relative(energy), relative(casimir)
     exact = exact_error = None
     if axis is not None:
         exact = np.asarray(symmetric_solution(body, jnp.asarray(m0), jnp.asarray(t), axis=axis))

@@ -1,0 +1,237 @@
+"""The command line end to end, in-process through ``jaxsplit.cli.main``: the default
+``simulate`` (acceptance 3), outputs and metadata, csv, --force, non-finite runs,
+chunked runs equal to one run, ``check``, ``schemes`` and every ``--help``."""
+
+import json
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxsplit
+from jaxsplit.cli import COMMANDS, _load, main
+from jaxsplit.cli._common import first_nonfinite, read_metadata, run_chunked
+
+# Chunking changes where flows merge across step boundaries: equal up to round-off.
+CHUNK_RTOL = 1e-13
+# A splitting of exact rotations keeps the Casimir to round-off over 10^4 steps.
+CASIMIR_TOL = 1e-12
+
+
+def _json_out(capsys):
+    out = capsys.readouterr().out.strip().splitlines()
+    assert len(out) == 1, out
+    return json.loads(out[0])
+
+
+def test_simulate_with_no_arguments_is_the_paper_case(capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["simulate"]) == 0
+    out = capsys.readouterr().out
+    assert "lie-trotter" in out and "vs exact solution" in out and "10,000 steps" in out
+    files = sorted(p.name for p in (tmp_path / "jaxsplit-runs").iterdir())
+    assert len(files) == 2 and files[0].endswith(".npz") and files[1].endswith(".png")
+    # A second run with no arguments does not fail on the existing files: new names.
+    assert main(["simulate", "--steps", "10"]) == 0
+    assert len(list((tmp_path / "jaxsplit-runs").iterdir())) == 4
+
+    with np.load(tmp_path / "jaxsplit-runs" / files[0]) as z:
+        meta = read_metadata(z)
+        t, m = z["t"], z["m"]
+    assert meta["inertia"] == list(jaxsplit.PAPER_BODY) and meta["m0"] == list(jaxsplit.PAPER_M0)
+    assert meta["scheme"] == "lie-trotter" and meta["dt"] == 0.01 and meta["steps_requested"] == 10_000
+    assert meta["dtype"] == "float64" and meta["jaxsplit_version"] == jaxsplit.__version__
+    assert m.dtype == np.float64 and m.shape == (10_001, 3) and t[-1] == pytest.approx(100.0)
+    # The trajectory is Lie-Trotter's: compare with the library called directly.
+    body = jaxsplit.RigidBody(jnp.asarray(jaxsplit.PAPER_BODY))
+    direct = jaxsplit.integrate(jaxsplit.splitting(body, "lie-trotter"), jnp.asarray(jaxsplit.PAPER_M0),
+                                0.01, 10_000)
+    np.testing.assert_allclose(m[-1], np.asarray(direct), rtol=CHUNK_RTOL, atol=CHUNK_RTOL)
+
+
+def test_json_summary_matches_the_saved_trajectory(capsys, tmp_path):
+    out = tmp_path / "run.npz"
+    argv = ["simulate", "--scheme", "strang", "--dt", "0.05", "--steps", "400", "--save-every", "3",
+            "--out", str(out), "--json", "--no-figure"]
+    assert main(argv) == 0
+    s = _json_out(capsys)
+    for key in ("energy_error_max", "casimir_error_max", "steps", "scheme", "seconds", "exact_error_max"):
+        assert key in s
+    assert s["steps"] == 400 and s["scheme"] == "strang" and s["outputs"] == {"trajectory": str(out)}
+    with np.load(out) as z:
+        m, step, t = z["m"], z["step"], z["t"]
+        assert read_metadata(z)["save_every"] == 3
+    # x0, every 3rd state and the last one, as integrate(save_every=3) saves them.
+    np.testing.assert_array_equal(step, np.r_[np.arange(0, 400, 3), 400])
+    np.testing.assert_allclose(t, step * 0.05, rtol=1e-15)
+    inertia = np.asarray(jaxsplit.PAPER_BODY)
+    energy = 0.5 * np.sum(m * m / inertia, axis=1)
+    casimir = 0.5 * np.sum(m * m, axis=1)
+    assert s["energy_error_max"] == pytest.approx(np.max(np.abs(energy / energy[0] - 1)), rel=1e-12)
+    assert s["casimir_error_max"] == pytest.approx(np.max(np.abs(casimir / casimir[0] - 1)), rel=1e-12, abs=1e-18)
+    assert s["casimir_error_max"] < CASIMIR_TOL
+    exact = np.asarray(jaxsplit.symmetric_solution(jaxsplit.RigidBody(inertia), jnp.asarray(jaxsplit.PAPER_M0),
+                                                   jnp.asarray(t)))
+    assert s["exact_error_max"] == pytest.approx(np.max(np.abs(m - exact)), rel=1e-12)
+    assert s["exact_error_max"] > 0  # Strang is not exact on the axes split
+
+
+def test_csv_holds_the_same_trajectory_as_npz(capsys, tmp_path):
+    common = ["simulate", "--inertia", "3,2,1.5", "--m0", "0.2,-0.9,0.3", "--scheme", "kahan-li-6",
+              "--split", "casimir", "--t-end", "2", "--dt", "0.1", "--no-figure", "--quiet"]
+    assert main(common + ["--out", str(tmp_path / "a.npz")]) == 0
+    assert main(common + ["--out", str(tmp_path / "b"), "--format", "csv"]) == 0
+    capsys.readouterr()
+    with np.load(tmp_path / "a.npz") as z:
+        m, meta = z["m"], read_metadata(z)
+    assert "m_exact" not in np.load(tmp_path / "a.npz").files  # asymmetric body: no exact solution
+    text = (tmp_path / "b.csv").read_text().splitlines()
+    assert text[0].startswith("# metadata: ")
+    assert json.loads(text[0][len("# metadata: "):])["inertia"] == meta["inertia"] == [3.0, 2.0, 1.5]
+    assert text[1] == "# step,t,m1,m2,m3,energy,casimir"
+    data = np.loadtxt(tmp_path / "b.csv", delimiter=",")
+    np.testing.assert_array_equal(data[:, 2:5], m)  # %.17g round-trips float64 exactly
+    assert meta["steps_requested"] == 20 and meta["shift_axis"] == 2
+
+
+def test_force_overwrites_atomically(capsys, tmp_path):
+    out = tmp_path / "run.npz"
+    out.write_bytes(b"old")
+    assert main(["simulate", "--steps", "5", "--out", str(out), "--force", "--no-figure"]) == 0
+    with np.load(out) as z:
+        assert z["m"].shape == (6, 3)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.npz"]  # no temporary files left
+
+
+def test_no_save_writes_nothing(capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["simulate", "--steps", "10", "--no-save"]) == 0
+    assert "no files written" in capsys.readouterr().out
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_negative_values_and_backward_integration(capsys, tmp_path):
+    out = tmp_path / "back.npz"
+    assert main(["simulate", "--m0", "-0.6,0,0.8", "--dt", "-0.01", "--steps", "100", "--out", str(out),
+                 "--no-figure", "--json"]) == 0
+    s = _json_out(capsys)
+    assert s["m0"] == [-0.6, 0.0, 0.8] and s["t_end"] == pytest.approx(-1.0)
+    with np.load(out) as z:
+        assert z["t"][-1] == pytest.approx(-1.0)
+
+
+def _doubling(body, scheme, split="axes", **kwargs):
+    return lambda x, h: 2.0 * x
+
+
+def _first_overflow_step():
+    x, k = 1.0, 0
+    while np.isfinite(x):
+        x, k = x * 2.0, k + 1
+    return k
+
+
+def test_nonfinite_state_stops_reports_and_keeps_the_work(capsys, tmp_path, monkeypatch):
+    monkeypatch.setattr("jaxsplit._splitting.splitting", _doubling)
+    out = tmp_path / "blowup.npz"
+    rc = main(["simulate", "--m0", "1,0,0", "--steps", "5000", "--save-every", "100", "--out", str(out)])
+    captured = capsys.readouterr()
+    bad = _first_overflow_step()  # 1024 for float64
+    assert rc == 3
+    assert f"non-finite at step {bad:,}" in captured.err and f"t = {bad * 0.01:g}" in captured.err
+    assert "Traceback" not in captured.err
+    with np.load(out) as z:
+        step, m, meta = z["step"], z["m"], read_metadata(z)
+    assert np.all(np.isfinite(m))
+    assert step[-1] == bad - 1 and list(step[:-1]) == list(range(0, bad - 1, 100))
+    np.testing.assert_array_equal(m[-1], [2.0 ** (bad - 1), 0, 0])
+    assert meta["status"] == "nonfinite" and meta["nonfinite_step"] == bad
+    assert (tmp_path / "blowup.png").exists()
+
+
+def test_first_nonfinite_narrows_down_to_the_step():
+    bad = _first_overflow_step()
+    for n in (bad, bad + 1, 3 * bad, 50_000):
+        k, last = first_nonfinite(lambda x, h: 2.0 * x, jnp.ones(2), 0.1, n)
+        assert k == bad and np.all(np.asarray(last) == 2.0 ** (bad - 1))
+
+
+@pytest.mark.parametrize("save_every,chunk", [(1, 64), (7, 70), (1000, 1000)])
+def test_chunked_run_equals_one_run(save_every, chunk):
+    body = jaxsplit.RigidBody(jnp.asarray([3.0, 2.0, 1.5]))
+    step = jaxsplit.splitting(body, "strang")
+    m0 = jnp.asarray([0.2, 0.9, 0.3])
+    res = run_chunked(step, m0, 0.05, 1000, save_every, chunk=chunk)
+    one = jaxsplit.integrate(step, m0, 0.05, 1000, save_every=save_every)
+    assert res.completed == 1000 and res.nonfinite_step is None and not res.interrupted
+    np.testing.assert_allclose(res.steps * 0.05, np.asarray(one.t), rtol=1e-15)
+    np.testing.assert_allclose(res.x, np.asarray(one.x), rtol=CHUNK_RTOL, atol=CHUNK_RTOL)
+
+
+def test_check_measures_poisson_defect_and_order(capsys):
+    assert main(["check", "--scheme", "strang", "--json", "--states", "8"]) == 0
+    r = _json_out(capsys)
+    assert r["poisson_ok"] and r["poisson_defect_max"] < 1e-12
+    assert abs(r["measured_order"] - 2) < 0.3 and r["order_ok"]
+    assert r["reference"].startswith("exact")
+
+
+def test_check_reports_a_non_poisson_map_and_a_wrong_order(capsys, monkeypatch):
+    # Explicit Euler is neither Poisson nor of order 2: check must say so (exit 1).
+    def euler(body, scheme, split="axes", **kwargs):
+        return lambda m, h: m + h * body.vector_field(m)
+
+    monkeypatch.setattr("jaxsplit._splitting.splitting", euler)
+    assert main(["check", "--scheme", "strang", "--json", "--states", "4", "--t-end", "1"]) == 1
+    r = _json_out(capsys)
+    assert not r["poisson_ok"] and r["poisson_defect_max"] > 1e-6
+    assert abs(r["measured_order"] - 1) < 0.3 and not r["order_ok"]
+
+
+def test_check_exact_splitting_is_not_a_failure(capsys):
+    # Symmetric body, Casimir split with the automatic shift: one piece, so the scheme is exact.
+    assert main(["check", "--scheme", "strang", "--split", "casimir", "--json", "--states", "4"]) == 0
+    r = _json_out(capsys)
+    assert r["measured_order"] is None and "exact" in r["order_note"] and r["order_ok"]
+
+
+def test_schemes_table_lists_every_registered_scheme(capsys):
+    assert main(["schemes"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].split()[:4] == ["name", "order", "stages", "form"]
+    names = [line.split()[0] for line in lines[1:]]
+    assert names == list(jaxsplit.schemes)
+    assert main(["schemes", "--json"]) == 0
+    table = _json_out(capsys)["schemes"]
+    for row in table:
+        s = jaxsplit.schemes[row["name"]]
+        assert (row["order"], row["stages"], row["form"]) == (s.order, s.stages, s.form)
+
+
+@pytest.mark.parametrize("command", [c for c in COMMANDS if _load(c) is not None])
+def test_every_command_help_shows_examples(command, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main([command, "--help"])
+    assert exit_.value.code == 0
+    assert "example" in capsys.readouterr().out.lower()
+
+
+def test_top_level_help_lists_the_commands(capsys):
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    out = capsys.readouterr().out
+    for command in ("simulate", "schemes", "check", "sweep"):
+        assert command in out
+    assert main([]) == 0
+
+
+def test_figure_is_a_png_of_legible_size(capsys, tmp_path):
+    import matplotlib.image
+
+    out = tmp_path / "r.npz"
+    assert main(["simulate", "--steps", "200", "--out", str(out), "--quiet"]) == 0
+    image = matplotlib.image.imread(tmp_path / "r.png")
+    height, width = image.shape[:2]
+    assert width >= 1200 and height >= 600
+    # Not blank: a good share of pixels is not white.
+    assert np.mean(np.any(image[..., :3] < 0.9, axis=-1)) > 0.05
