@@ -20,6 +20,10 @@ from ._compose import Composition as Composition
 from ._compose import compose as compose
 from ._errors import InputError as InputError
 from ._exact import symmetric_solution as symmetric_solution
+from ._fit import FitResult as FitResult
+from ._fit import fit_inertia as fit_inertia
+from ._fit import integrate_checkpointed as integrate_checkpointed
+from ._fit import simulate_observations as simulate_observations
 from ._integrate import Trajectory as Trajectory
 from ._integrate import integrate as integrate
 from ._order import OrderFit as OrderFit

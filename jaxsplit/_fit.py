@@ -1,0 +1,345 @@
+"""Fitting a body to an observed trajectory, and gradients through long horizons.
+
+What m(t) can tell (identifiability)
+------------------------------------
+Write w = (1/I1, 1/I2, 1/I3). The equations ṁ = m × (w ⊙ m) are unchanged by
+w → w + c·(1, 1, 1): the shift adds c·m × m = 0 (the Hamiltonian changes by c·C, and the
+Casimir C commutes with everything). So an observed m(t) determines exactly two numbers of
+the body, the differences w1 − w3 and w2 − w3 (their magnitudes too, since the time axis
+is observed), and nothing else. The ratios I2/I1 = w1/w2 and I3/I1 = w1/w3 change along
+the unobservable direction c, so they are NOT identifiable from m(t) alone; neither is the
+overall scale. (Conversely a rescaled body I → λI is not an equivalent explanation: it
+changes the time scale.) In log-inertia coordinates u = log I the unobservable direction is
+du ∝ −(I1, I2, I3); the Gauss–Newton Hessian of the misfit has it as its null vector
+(``FitResult.null_direction``, checked in the tests).
+
+``fit_inertia`` therefore works in two stages:
+
+1. *Trajectory fit* of the identifiable part: log I2, log I3 and (optionally) m0, with I1
+   held at a reference value chosen so every moment stays positive near the optimum
+   (the inertia is parametrised by its logarithm, so it cannot turn negative). The start
+   comes from integral matching: m_{k+1} − m_k ≈ ½Δt (A(m_k) + A(m_{k+1})) w is linear in
+   w and is solved by least squares (minimum norm along the null direction). Then Adam,
+   then optax's L-BFGS minimise the mean squared misfit through the integrator.
+2. *Gauge*: one extra piece of information fixes c in closed form, either a known kinetic
+   energy E = ½ Σ w_i m0_i² (``energy=``, with its standard deviation ``energy_sigma``) or
+   a known moment I1 (``inertia1=``). With neither, I1 = 1 (the data's units) is ASSUMED,
+   and ``FitResult.gauge`` says so. ``ratio_range`` gives the ratios over every gauge
+   that keeps all moments positive — what m(t) alone allows.
+
+Uncertainty: the Gauss–Newton covariance σ̂² (JᵀJ)⁻¹ of stage 1 (σ̂² = RSS / (3n − p)),
+propagated to the ratios with the Jacobian of the gauge map (delta method), the energy's
+variance included.
+
+Long horizons: ``integrate_checkpointed`` runs blocks of steps under ``jax.checkpoint``,
+so reverse mode stores one state per block plus one block of residuals during the
+backward pass: memory O(n/B + B), O(√n) with the default B = ⌈√n⌉ (measured by
+``benchmarks/memory_checkpoint.py``). The trajectory fit checkpoints each interval between
+observations the same way.
+"""
+
+import math
+import time
+from typing import NamedTuple
+
+import jax
+import jax.flatten_util
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from ._body import RigidBody
+from ._errors import InputError
+from ._integrate import _advance
+from ._schemes import schemes
+from ._splitting import splitting
+
+
+# ------------------------------------------------------------------ long horizons
+def integrate_checkpointed(step, x0, h, n_steps: int, *, block: int | None = None):
+    """Final state after ``n_steps`` steps, for reverse-mode gradients with O(n/B + B) memory.
+
+    The steps run as ⌊n/B⌋ blocks of B (default ⌈√n⌉) under ``jax.checkpoint`` plus the
+    remainder; the forward values are those of ``integrate`` (same merged sub-flows).
+    Not jitted: call it inside your own ``jit``/``grad``.
+    """
+    if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)) or n_steps < 0:
+        raise InputError(f"n_steps must be an integer >= 0, got {n_steps!r}")
+    n_steps = int(n_steps)
+    if block is None:
+        block = max(1, math.isqrt(max(n_steps, 1)))
+    if isinstance(block, bool) or not isinstance(block, (int, np.integer)) or block < 1:
+        raise InputError(f"block must be an integer >= 1, got {block!r}")
+    dtype = jnp.result_type(*jax.tree_util.tree_leaves(x0))
+    h = jnp.asarray(h, dtype=dtype)
+    blocks, rest = divmod(n_steps, int(block))
+    run_block = jax.checkpoint(lambda x: _advance(step, x, h, int(block)))
+    x = jax.lax.scan(lambda y, _: (run_block(y), None), x0, length=blocks)[0] if blocks else x0
+    return _advance(step, x, h, rest) if rest else x
+
+
+# ------------------------------------------------------------------ data checks
+def _check_observations(t, m):
+    try:
+        t = np.asarray(t, dtype=float)
+        m = np.asarray(m, dtype=float)
+    except (TypeError, ValueError) as err:
+        raise InputError(f"observations must be numeric arrays: {err}") from err
+    if t.ndim != 1 or len(t) < 4:
+        raise InputError(f"t must have shape (n,) with n >= 4, got shape {t.shape}")
+    if m.shape != (len(t), 3):
+        raise InputError(f"m must have shape (n, 3) = ({len(t)}, 3) matching t, got {m.shape}")
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(m))):
+        raise InputError("observations t and m must be finite (no NaN or inf)")
+    if np.any(np.diff(t) <= 0):
+        raise InputError("t must be strictly increasing")
+    return t, m
+
+
+# ------------------------------------------------------------------ model
+def _a_matrix(m):
+    """A(m) with ṁ = m × (w ⊙ m) = A(m) w: column i is m_i (m × e_i). Shape (..., 3, 3)."""
+    eye = np.eye(3)
+    return np.stack([m[..., i, None] * np.cross(m, eye[i]) for i in range(3)], axis=-1)
+
+
+def integral_matching(t, m) -> np.ndarray:
+    """Least-squares w = 1/I from m_{k+1} − m_k ≈ ½Δt (A(m_k) + A(m_{k+1})) w.
+
+    Minimum-norm solution: the component along (1, 1, 1) is not determined by m(t).
+    """
+    t, m = _check_observations(t, m)
+    a = 0.5 * np.diff(t)[:, None, None] * (_a_matrix(m[:-1]) + _a_matrix(m[1:]))
+    w, *_ = np.linalg.lstsq(a.reshape(-1, 3), np.diff(m, axis=0).reshape(-1), rcond=None)
+    return w
+
+
+def rolled_step(composition):
+    """The same map as ``composition(m, h)``, its sub-flows run by a ``lax.scan`` over the
+    word with ``lax.switch`` on the piece: compile time no longer grows with the word
+    (a 6th-order word under ``grad`` compiles ~4x faster), at ~3x the run time."""
+    pieces = np.array([p for p, _ in composition.word], dtype=np.int32)
+    weights = np.array([w for _, w in composition.word])
+    branches = [lambda y, t, f=f: f(y, t, composition.params) for f in composition.flows]
+
+    def step(m, h):
+        def sub(y, pw):
+            return jax.lax.switch(pw[0], branches, y, pw[1] * h), None
+
+        return jax.lax.scan(sub, m, (jnp.asarray(pieces), jnp.asarray(weights, m.dtype)))[0]
+
+    return step
+
+
+def _predict(scheme, shift, n_sub: int, log_inertia, m0, dts):
+    """m at every observation time: one checkpointed block of ``n_sub`` steps per interval."""
+    step = rolled_step(splitting(RigidBody(jnp.exp(log_inertia)), scheme, "casimir", shift_axis=shift))
+
+    @jax.checkpoint
+    def interval(m, dt):
+        h = dt / n_sub
+        m = jax.lax.fori_loop(0, n_sub, lambda _, y: step(y, h), m)
+        return m, m
+
+    return jnp.concatenate([m0[None], jax.lax.scan(interval, m0, dts)[1]])
+
+
+class FitResult(NamedTuple):
+    """Outcome of ``fit_inertia`` (numpy arrays and floats; see the module docstring)."""
+
+    inertia: np.ndarray  # (3,) under the gauge
+    inertia_ratios: np.ndarray  # (I2/I1, I3/I1)
+    ratio_std: np.ndarray  # Gauss–Newton (delta-method) standard deviations
+    inverse_differences: np.ndarray  # identifiable: (1/I1 − 1/I3, 1/I2 − 1/I3)
+    inverse_differences_std: np.ndarray
+    m0: np.ndarray
+    loss: float  # final mean squared misfit per component
+    noise_sigma: float  # σ̂ from the residuals
+    iterations: int  # Adam + L-BFGS iterations
+    gauge: str
+    ratio_range: np.ndarray  # (2, 2): [min, max] of each ratio over all positive gauges
+    null_direction: np.ndarray  # GN null vector in log-inertia coordinates (unit)
+    null_alignment: float  # |cos| between it and the predicted direction ∝ I (stage-1 gauge)
+    hessian_eigenvalues: np.ndarray  # of the GN Hessian over (log I1, log I2, log I3)
+    seconds: float
+
+    def as_dict(self) -> dict:
+        out = {}
+        for k, v in self._asdict().items():
+            out[k] = v.tolist() if isinstance(v, np.ndarray) else v
+        return out
+
+
+def _lbfgs(fun, params, max_iter: int, tol: float):
+    """optax L-BFGS with its zoom line search, as one ``lax.while_loop``."""
+    opt = optax.lbfgs()
+    value_and_grad = optax.value_and_grad_from_state(fun)
+
+    def body(carry):
+        p, state, k = carry
+        value, grad = value_and_grad(p, state=state)
+        updates, state = opt.update(grad, state, p, value=value, grad=grad, value_fn=fun)
+        return optax.apply_updates(p, updates), state, k + 1
+
+    def cond(carry):
+        _, state, k = carry
+        grad = optax.tree_utils.tree_get(state, "grad")
+        gnorm = optax.tree_utils.tree_l2_norm(grad)
+        return (k == 0) | ((k < max_iter) & (gnorm >= tol))
+
+    p, _, k = jax.lax.while_loop(cond, body, (params, opt.init(params), 0))
+    return p, k
+
+
+def _adam(fun, params, steps: int, lr: float):
+    opt = optax.adam(lr)
+
+    def body(carry, _):
+        p, state = carry
+        grad = jax.grad(fun)(p)
+        updates, state = opt.update(grad, state, p)
+        return (optax.apply_updates(p, updates), state), None
+
+    return jax.lax.scan(body, (params, opt.init(params)), length=steps)[0][0] if steps else params
+
+
+def _gauge_shift(w, m0, energy, inertia1):
+    """c with w + c·1 matching the energy ½ Σ (w_i + c) m0_i² = E, or 1/I1."""
+    if energy is not None:
+        return (2 * energy - jnp.sum(w * m0 * m0)) / jnp.sum(m0 * m0)
+    return 1 / inertia1 - w[0]
+
+
+def fit_inertia(t, m, *, energy: float | None = None, energy_sigma: float = 0.0,
+                inertia1: float | None = None, fit_m0: bool = True, scheme="kahan-li-6",
+                max_step: float = 0.05, adam_steps: int = 50, adam_lr: float = 3e-4,
+                lbfgs_iter: int = 200, tol: float = 1e-10) -> FitResult:
+    """Recover the inertia ratios (and m0) from observations ``m`` (n, 3) at times ``t`` (n,).
+
+    The gauge (module docstring) comes from ``energy`` (± ``energy_sigma``) or ``inertia1``;
+    with neither, I1 = 1 is assumed. The model integrates ``scheme`` (Casimir split) with
+    ⌈Δt / max_step⌉ steps per observation interval. Runs in the dtype JAX gives ``float``
+    (float64 when x64 is enabled: recommended).
+    """
+    t0 = time.perf_counter()
+    t, m = _check_observations(t, m)
+    scheme = schemes.resolve(scheme)
+    if energy is not None and inertia1 is not None:
+        raise InputError("give energy= or inertia1= (one gauge), not both")
+    if energy is not None and not (math.isfinite(energy) and energy > 0):
+        raise InputError(f"energy must be a positive number, got {energy!r}")
+    if inertia1 is not None and not (math.isfinite(inertia1) and inertia1 > 0):
+        raise InputError(f"inertia1 must be a positive number, got {inertia1!r}")
+    if not (math.isfinite(energy_sigma) and energy_sigma >= 0):
+        raise InputError(f"energy_sigma must be >= 0, got {energy_sigma!r}")
+    if not (math.isfinite(max_step) and max_step > 0):
+        raise InputError(f"max_step must be positive, got {max_step!r}")
+    gauge = (f"energy E = {energy:.9g} (sigma {energy_sigma:.3g})" if energy is not None else
+             f"known I1 = {inertia1:.9g}" if inertia1 is not None else
+             "ASSUMED I1 = 1 (m(t) does not determine it; pass energy= or inertia1=)")
+    if energy is None and inertia1 is None:
+        inertia1 = 1.0
+
+    # Stage 0: integral matching, then a reference gauge keeping every moment well positive.
+    w0 = integral_matching(t, m)
+    spread = max(float(np.ptp(w0)), 1e-8 * float(np.max(np.abs(w0))), 1e-300)
+    w_ref = w0 - w0.min() + spread
+    shift = int(np.argsort(w_ref, kind="stable")[1]) + 1
+    dtype = jnp.result_type(float)
+    dts = jnp.asarray(np.diff(t), dtype)
+    n_sub = max(1, math.ceil(float(np.max(np.diff(t))) / max_step))
+    obs = jnp.asarray(m, dtype)
+    log_i1 = jnp.asarray(-np.log(w_ref[0]), dtype)
+
+    def unpack(p):
+        log_inertia = jnp.concatenate([log_i1[None], p["log_i23"]])
+        return log_inertia, (p["m0"] if fit_m0 else obs[0])
+
+    def residuals(p):
+        log_inertia, m0 = unpack(p)
+        return (_predict(scheme, shift, n_sub, log_inertia, m0, dts) - obs).reshape(-1)
+
+    def loss(p):
+        r = residuals(p)
+        return jnp.mean(r * r)
+
+    params = {"log_i23": jnp.asarray(-np.log(w_ref[1:]), dtype), "m0": obs[0]}
+    if not fit_m0:
+        params = {"log_i23": params["log_i23"], "m0": jnp.zeros((0,), dtype)}
+
+    @jax.jit
+    def optimise(p):
+        p = _adam(loss, p, adam_steps, adam_lr)
+        p, k = _lbfgs(loss, p, lbfgs_iter, tol)
+        return p, k, loss(p)
+
+    params, iters, final = optimise(params)
+
+    # Gauss–Newton Hessian of the identifiable problem, and of the full log-inertia one.
+    flat, unravel = jax.flatten_util.ravel_pytree(params)
+    jac = jax.jacfwd(lambda f: residuals(unravel(f)))(flat)
+    n_res, n_par = jac.shape
+    rss = float(jnp.sum(residuals(params) ** 2))
+    sigma2 = rss / max(n_res - n_par, 1)
+    cov = sigma2 * np.linalg.pinv(np.asarray(jac.T @ jac))
+    log_inertia_hat, m0_hat = unpack(params)
+
+    def full_residuals(log_inertia):
+        return (_predict(scheme, shift, n_sub, log_inertia, m0_hat, dts) - obs).reshape(-1)
+
+    jfull = np.asarray(jax.jacfwd(full_residuals)(log_inertia_hat))
+    evals, evecs = np.linalg.eigh(jfull.T @ jfull)
+    null = evecs[:, 0] * np.sign(evecs[:, 0].sum() or 1.0)
+
+    # Gauge map (flat params, energy) -> (ratios, differences), with its Jacobian.
+    e_val = 0.0 if energy is None else float(energy)
+
+    def gauge_map(f, e):
+        log_inertia, m0 = unpack(unravel(f))
+        w = jnp.exp(-log_inertia)
+        c = _gauge_shift(w, m0, e if energy is not None else None, inertia1)
+        wg = w + c
+        return jnp.concatenate([jnp.stack([wg[0] / wg[1], wg[0] / wg[2]]), (w - w[2])[:2], wg])
+
+    e_arr = jnp.asarray(e_val, dtype)
+    out = np.asarray(gauge_map(flat, e_arr))
+    jg = np.asarray(jax.jacfwd(gauge_map, argnums=(0, 1))(flat, e_arr)[0])
+    je = np.asarray(jax.jacfwd(gauge_map, argnums=1)(flat, e_arr))
+    var = np.einsum("ij,jk,ik->i", jg, cov, jg) + je**2 * energy_sigma**2
+    wg = out[4:]
+    if np.any(wg <= 0):
+        raise InputError(
+            f"the gauge ({gauge}) makes a moment non-positive: 1/I = {wg.tolist()}; "
+            "the energy or I1 given does not fit these observations")
+    d = out[2:4]
+    # Ratios over every positive gauge c (all w + c > 0): each ratio is monotone in c, so
+    # its range lies between its value as the smallest w + c -> 0 and its limit 1 (c -> inf).
+    wf = np.asarray(jnp.exp(-log_inertia_hat))
+    w_edge = wf - wf.min()
+    with np.errstate(divide="ignore", invalid="ignore"):
+        edge = np.array([w_edge[0] / w_edge[1], w_edge[0] / w_edge[2]])
+    edge = np.where(np.isnan(edge), 1.0, edge)
+    ratio_range = np.sort(np.stack([edge, np.ones(2)], axis=1), axis=1)
+    i_ref = 1 / wf
+    alignment = float(abs(null @ i_ref) / np.linalg.norm(i_ref))
+    return FitResult(
+        inertia=1 / wg, inertia_ratios=out[:2], ratio_std=np.sqrt(var[:2]),
+        inverse_differences=d, inverse_differences_std=np.sqrt(var[2:4]),
+        m0=np.asarray(m0_hat), loss=float(final), noise_sigma=math.sqrt(sigma2),
+        iterations=int(adam_steps) + int(iters), gauge=gauge, ratio_range=ratio_range,
+        null_direction=null, null_alignment=alignment, hessian_eigenvalues=evals,
+        seconds=time.perf_counter() - t0)
+
+
+def simulate_observations(inertia, m0, t, noise: float, *, seed: int = 0, scheme="kahan-li-8",
+                          max_step: float = 0.01):
+    """Noisy observations m(t_k) + N(0, noise²) of a body (a test and notebook helper)."""
+    t = np.asarray(t, dtype=float)
+    inertia = np.asarray(inertia, dtype=float)
+    dtype = jnp.result_type(float)
+    n_sub = max(1, math.ceil(float(np.max(np.diff(t))) / max_step))
+    shift = int(np.argsort(1 / inertia, kind="stable")[1]) + 1
+    clean = jax.jit(_predict, static_argnums=(0, 1, 2))(schemes.resolve(scheme), shift, n_sub, jnp.log(jnp.asarray(inertia, dtype)),
+                     jnp.asarray(m0, dtype), jnp.asarray(np.diff(t), dtype))
+    rng = np.random.default_rng(seed)
+    return np.asarray(clean) + noise * rng.standard_normal((len(t), 3))
