@@ -318,8 +318,8 @@ def _chunk_ok(path: Path) -> bool:
     try:
         with np.load(path) as z:
             return "case_index" in z.files and len(z["case_index"]) > 0
-    except (OSError, ValueError, EOFError):
-        return False  # unreadable: computed again
+    except Exception:  # noqa: BLE001 - truncated or foreign file (BadZipFile, OSError, ...): recompute
+        return False
 
 
 def _merge(out: Path, cases: dict, n_chunks: int, inputs: dict) -> dict:
