@@ -35,6 +35,7 @@ from ._rotations import rotation_matrix as rotation_matrix
 from ._schemes import Scheme as Scheme
 from ._schemes import schemes as schemes
 from ._schemes import triple_jump as triple_jump
+from ._stability import stability_map as stability_map
 from ._splitting import AxisRotation as AxisRotation
 from ._splitting import splitting as splitting
 from ._hamilton_poisson import HamiltonPoisson as HamiltonPoisson
