@@ -32,14 +32,22 @@ def word(scheme: Scheme, n_pieces: int) -> Word:
             f"the splitting has {n_pieces}; use split='casimir' or a non-partitioned scheme"
         )
     c = scheme.coefficients
+
+    def lie(w):  # Φ_{wh}: the first piece acts first
+        return [(p, w) for p in range(n_pieces)]
+
+    def adjoint(w):  # Φ*_{wh}: the last piece acts first
+        return [(p, w) for p in reversed(range(n_pieces))]
+
+    entries = []
     if scheme.form == "partitioned":
         entries = [(k % 2, w) for k, w in enumerate(c)]
-    else:
-        alphas = c if scheme.form == "lie-adjoint" else tuple(g / 2 for g in c for _ in (0, 1))
-        entries = []
-        for adjoint, lie in zip(alphas[0::2], alphas[1::2]):
-            entries += [(p, adjoint) for p in reversed(range(n_pieces))]  # Φ*: last piece first
-            entries += [(p, lie) for p in range(n_pieces)]  # Φ: first piece first
+    elif scheme.form == "lie-adjoint":  # Φ_{α2 h} ∘ Φ*_{α1 h} ∘ …: the adjoint acts first
+        for a_adjoint, a_lie in zip(c[0::2], c[1::2]):
+            entries += adjoint(a_adjoint) + lie(a_lie)
+    else:  # Strang S_h = Φ*_{h/2} ∘ Φ_{h/2}: the paper's φ²_t, first piece at both ends
+        for g in c:
+            entries += lie(g / 2) + adjoint(g / 2)
     return tuple((p, w) for p, w in entries if w != 0.0)
 
 
