@@ -314,6 +314,9 @@ def _fmt_seconds(s: float) -> str:
     return f"{h}:{m:02d}:{sec:02d}" if h else f"{m:d}:{sec:02d}"
 
 
+PROGRESS_DELAY = 0.5  # seconds before a bar is drawn: quick runs stay silent
+
+
 class Progress:
     """A one-line progress bar on stderr: done/total, rate, ETA.
 
@@ -322,8 +325,9 @@ class Progress:
     """
 
     def __init__(self, total: int, *, unit: str = "steps", stream=None, enabled: bool | None = None,
-                 delay: float = 0.5, width: int = 24):
-        self.total, self.unit, self.width, self.delay = int(total), unit, width, delay
+                 delay: float | None = None, width: int = 24):
+        self.total, self.unit, self.width = int(total), unit, width
+        self.delay = PROGRESS_DELAY if delay is None else delay
         self.stream = sys.stderr if stream is None else stream
         if enabled is None or enabled:
             try:
@@ -369,7 +373,7 @@ class Progress:
 
 # --------------------------------------------------------------------------- chunked runs
 
-TARGET_FLOWS_PER_CHUNK = 2_000_000  # ~0.1-0.3 s of work per chunk on a CPU core
+TARGET_FLOWS_PER_CHUNK = 1_000_000  # ~0.05-0.4 s of work per chunk on a CPU core
 
 
 class RunResult(NamedTuple):
