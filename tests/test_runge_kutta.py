@@ -1,0 +1,155 @@
+"""The paper's classical integrators: Runge–Kutta methods from tableaus, the Ruth map,
+Hamilton–Poisson systems.
+
+Oracles (shared/reference/rigid-body.md): methods satisfying (2.7) keep every quadratic
+invariant (H and C of the rigid body) to round-off, the trapezoidal rule does not (~1e-4
+at h = 0.1 over T = 1000); explicit Euler obeys |m_{n+1}|² − |m_n|² = h²|f(m_n)|² exactly.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxsplit
+from jaxsplit import (STANDARD_CASE, RigidBody, example_3_1, explicit_euler, gauss_legendre, integrate,
+                      monitor_invariants, rigid_body_system, rk4, ruth, runge_kutta, trapezoid)
+
+QUADRATIC_INVARIANT_TOL = 1e-13  # GL over 1e4 steps, absolute (H, C ~ 0.5)
+TRAPEZOID_FLOOR = 1e-6  # the trapezoidal rule's invariant errors are ~1e-4
+EULER_IDENTITY_TOL = 4e-16  # |m|² ~ 1: a few ulps
+NEWTON_TOL = 1e-15  # stage residual after the solve, states of size ~1
+FD_TOL = 1e-7  # central differences with step 1e-5: truncation ~1e-10, round-off ~1e-11
+ORDER_TOL = 0.3
+FIELD_TOL = 1e-15
+
+BODY = RigidBody(jnp.array(STANDARD_CASE.inertia))
+M0 = jnp.array(STANDARD_CASE.m0)
+REFERENCE = jnp.array(STANDARD_CASE.reference)
+
+
+def _states(n, seed=0):
+    x = jax.random.normal(jax.random.PRNGKey(seed), (n, 3))
+    return x / jnp.linalg.norm(x, axis=1, keepdims=True)
+
+
+@pytest.mark.parametrize("stages", [1, 2, 3])
+def test_gauss_legendre_keeps_quadratic_invariants(stages):
+    traj = integrate(gauss_legendre(BODY, stages), M0, 0.1, 10_000, save_every=100)
+    errors = monitor_invariants(BODY, traj)
+    assert float(errors["energy"].max_absolute) <= QUADRATIC_INVARIANT_TOL
+    assert float(errors["casimir"].max_absolute) <= QUADRATIC_INVARIANT_TOL
+
+
+def test_trapezoid_does_not_keep_them():
+    traj = integrate(trapezoid(BODY), M0, 0.1, 10_000, save_every=100)
+    errors = monitor_invariants(BODY, traj)
+    assert float(errors["energy"].max_absolute) >= TRAPEZOID_FLOOR
+    assert float(errors["casimir"].max_absolute) >= TRAPEZOID_FLOOR
+
+
+def test_explicit_euler_norm_identity():
+    step = explicit_euler(BODY)
+    xs, hs = _states(128), jnp.linspace(1e-3, 1.0, 128)
+
+    def residual(m, h):
+        f = BODY.vector_field(m)
+        return jnp.abs(jnp.sum(step(m, h) ** 2) - jnp.sum(m**2) - h**2 * jnp.sum(f**2))
+
+    assert float(jnp.max(jax.vmap(residual)(xs, hs))) <= EULER_IDENTITY_TOL
+    # and |m| strictly grows: the identity is not vacuous
+    assert float(jnp.min(jax.vmap(lambda m, h: jnp.sum(step(m, h) ** 2) - 1)(xs, hs))) > 0
+
+
+@pytest.mark.parametrize("name", ["implicit-midpoint", "gauss-legendre-3", "radau-iia-2", "lobatto-iiia-3"])
+def test_newton_converges_to_round_off(name):
+    step = runge_kutta(BODY, name)
+    info = jax.jit(jax.vmap(step.newton_info, in_axes=(0, None)))(_states(32), 0.5)
+    assert float(jnp.max(info.residual)) <= NEWTON_TOL
+    assert int(jnp.max(info.iterations)) < step.max_iter
+    # the stages solve the equations they claim to
+    k = step.stage_derivatives(M0, 0.5)
+    a = jnp.asarray(step.tableau.a)
+    assert float(jnp.max(jnp.abs(k - jax.vmap(BODY.vector_field)(M0 + 0.5 * a @ k)))) <= NEWTON_TOL
+
+
+def _loss(m0, h, inertia):
+    step = gauss_legendre(RigidBody(inertia), 2)
+    m = integrate(step, m0, h, 20)
+    return m[0] + 2 * m[1] ** 2 - m[2]
+
+
+def test_gradients_match_finite_differences():
+    args = (M0, jnp.asarray(0.1), jnp.asarray(STANDARD_CASE.inertia))
+    grads = jax.grad(_loss, argnums=(0, 1, 2))(*args)
+    eps = 1e-5
+    for k, g in enumerate(grads):
+        base = np.asarray(args[k], dtype=float)
+        flat = base.reshape(-1)
+        for i in range(flat.size):
+            plus, minus = flat.copy(), flat.copy()
+            plus[i] += eps
+            minus[i] -= eps
+            vals = [list(args) for _ in range(2)]
+            vals[0][k], vals[1][k] = jnp.asarray(plus.reshape(base.shape)), jnp.asarray(minus.reshape(base.shape))
+            fd = (float(_loss(*vals[0])) - float(_loss(*vals[1]))) / (2 * eps)
+            exact = float(np.asarray(g).reshape(-1)[i])
+            assert abs(fd - exact) <= FD_TOL * max(1.0, abs(exact)), (k, i, fd, exact)
+
+
+def test_forward_mode_matches_reverse_mode():
+    jf = jax.jacfwd(lambda m: integrate(gauss_legendre(BODY, 3), m, 0.2, 5))(M0)
+    jr = jax.jacrev(lambda m: integrate(gauss_legendre(BODY, 3), m, 0.2, 5))(M0)
+    assert float(jnp.max(jnp.abs(jf - jr))) <= 1e-13
+
+
+@pytest.mark.parametrize("name,order,start", [("radau-iia-2", 3, 100), ("rk4", 4, 60), ("gauss-legendre-3", 6, 12)])
+def test_measured_order(name, order, start):
+    fit = jaxsplit.estimate_order(runge_kutta(BODY, name), M0, STANDARD_CASE.t_end,
+                                  jaxsplit.ladder(start, 8.0, 6), REFERENCE)
+    assert abs(fit.order - order) <= ORDER_TOL
+
+
+def test_measured_order_against_a_tight_reference_integration():
+    # explicit Euler over a short horizon, reference = 200 steps of Gauss-Legendre 3
+    fit = jaxsplit.estimate_order(explicit_euler(BODY), M0, 0.25, jaxsplit.ladder(2000, 8.0, 6),
+                                  reference_step=gauss_legendre(BODY, 3), reference_count=200)
+    assert abs(fit.order - 1) <= ORDER_TOL
+
+
+def test_ruth_is_formula_2_6():
+    x, h = jnp.array([0.3, -1.2]), 0.37
+    expected = jnp.array([x[0] + h * x[1], -h * x[0] + (1 - h**2) * x[1]])
+    assert float(jnp.max(jnp.abs(ruth()(x, h) - expected))) <= FIELD_TOL
+
+
+def test_systems_vector_fields():
+    system = rigid_body_system(BODY)
+    ms = _states(8)
+    assert float(jnp.max(jnp.abs(jax.vmap(system.vector_field)(ms) - jax.vmap(BODY.vector_field)(ms)))) <= FIELD_TOL
+    ex = example_3_1(2.0, -3.0, 1.0)
+    x = jnp.array([0.7, 1.3])
+    assert float(jnp.max(jnp.abs(ex.vector_field(x) - jnp.array([-3.0 * 1.3, -2.0 * 1.3])))) <= FIELD_TOL
+    # a user-defined system: the pendulum on (q, p)
+    pendulum = jaxsplit.canonical_system(lambda x: 0.5 * x[1] ** 2 - jnp.cos(x[0]), 2)
+    assert float(jnp.max(jnp.abs(pendulum.vector_field(x) - jnp.array([1.3, -jnp.sin(0.7)])))) <= FIELD_TOL
+
+
+def test_dtype_follows_input_and_vmap_matches_loop():
+    step = jax.jit(gauss_legendre(BODY, 2))
+    out32 = step(M0.astype(jnp.float32), 0.1)
+    assert out32.dtype == jnp.float32
+    assert jax.jit(rk4(BODY))(M0.astype(jnp.float32), 0.1).dtype == jnp.float32
+    xs = _states(4)
+    batched = jax.jit(jax.vmap(step, in_axes=(0, None)))(xs, 0.3)
+    looped = jnp.stack([step(x, 0.3) for x in xs])
+    assert float(jnp.max(jnp.abs(batched - looped))) <= 1e-15
+
+
+def test_bad_input():
+    with pytest.raises(jaxsplit.InputError, match="unknown tableau"):
+        runge_kutta(BODY, "rk5")
+    with pytest.raises(jaxsplit.InputError, match="vectors"):
+        gauss_legendre(BODY, 1)(jnp.ones((2, 3)), 0.1)
+    with pytest.raises(jaxsplit.InputError, match="stages"):
+        gauss_legendre(BODY, 0)
