@@ -36,6 +36,10 @@ from ._schemes import Scheme as Scheme
 from ._schemes import schemes as schemes
 from ._schemes import triple_jump as triple_jump
 from ._stability import stability_map as stability_map
+from ._tune import TunedScheme as TunedScheme
+from ._tune import order4_coefficients as order4_coefficients
+from ._tune import random_bodies as random_bodies
+from ._tune import tune_scheme as tune_scheme
 from ._splitting import AxisRotation as AxisRotation
 from ._splitting import splitting as splitting
 from ._hamilton_poisson import HamiltonPoisson as HamiltonPoisson
