@@ -238,3 +238,38 @@ def test_figure_is_a_png_of_legible_size(capsys, tmp_path):
     assert width >= 1200 and height >= 600
     # Not blank: a good share of pixels is not white.
     assert np.mean(np.any(image[..., :3] < 0.9, axis=-1)) > 0.05
+
+
+def test_ctrl_c_keeps_the_finished_chunks(capsys, tmp_path, monkeypatch):
+    import jaxsplit._integrate as integrate_module
+
+    real, calls = integrate_module.integrate, []
+
+    def interrupted_on_third_chunk(*args, **kwargs):
+        calls.append(args[3])
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(integrate_module, "integrate", interrupted_on_third_chunk)
+    monkeypatch.setattr("jaxsplit.cli._common.TARGET_FLOWS_PER_CHUNK", 3000)  # 1000 lie-trotter steps
+    out = tmp_path / "part.npz"
+    rc = main(["simulate", "--steps", "10000", "--save-every", "10", "--out", str(out), "--no-figure"])
+    captured = capsys.readouterr()
+    assert rc == 130 and "interrupted after 2,000 of 10,000 steps" in captured.err
+    with np.load(out) as z:
+        assert z["step"][-1] == 2000 and len(z["step"]) == 201
+        assert read_metadata(z)["status"] == "interrupted"
+
+
+def test_default_outputs_in_an_unwritable_directory_still_run(capsys, monkeypatch):
+    monkeypatch.chdir("/proc")  # not writable, even for root
+    assert main(["simulate", "--steps", "10"]) == 0
+    captured = capsys.readouterr()
+    assert "no files written" in captured.err and "--out" in captured.err
+    assert "max relative energy error" in captured.out
+
+
+def test_figure_only(capsys, tmp_path):
+    assert main(["simulate", "--steps", "10", "--figure", str(tmp_path / "f.png"), "--quiet"]) == 0
+    assert [p.name for p in tmp_path.iterdir()] == ["f.png"]

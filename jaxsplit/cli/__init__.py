@@ -24,8 +24,9 @@ examples:
   jaxsplit check --scheme kahan-li-6 --split casimir
   jaxsplit COMMAND --help                 # options and examples of each command
 
-exit status: 0 success; 2 bad input (one line on stderr); 3 the state became non-finite
-(what was computed is kept); 130 interrupted.
+exit status: 0 success; 1 `check` found a failed check; 2 bad input (one line on stderr,
+nothing run); 3 the state became non-finite (what was computed is kept); 130 interrupted
+(finished work is kept; `sweep --resume` continues).
 """
 
 # argparse treats "-0.6,0,0.8" as an option; these parsers have no option that looks

@@ -388,8 +388,9 @@ class RunResult(NamedTuple):
 
 
 def chunk_size(n_steps: int, save_every: int, flows_per_step: int = 1,
-               target_flows: int = TARGET_FLOWS_PER_CHUNK) -> int:
+               target_flows: int | None = None) -> int:
     """Steps per chunk: a multiple of ``save_every`` doing about ``target_flows`` flows."""
+    target_flows = TARGET_FLOWS_PER_CHUNK if target_flows is None else target_flows
     per = max(1, target_flows // max(1, flows_per_step))
     chunk = max(save_every, (per // save_every) * save_every)
     return min(chunk, max(save_every, -(-n_steps // save_every) * save_every))

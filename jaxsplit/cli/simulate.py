@@ -95,6 +95,9 @@ def _steps(args) -> int:
     n = round(args.t_end / abs(args.dt))
     if n < 1:
         raise InputError(f"--t-end {args.t_end:g} is shorter than one step of --dt {args.dt:g}")
+    if abs(n * abs(args.dt) - args.t_end) > 1e-9 * args.t_end:
+        print(f"jaxsplit: note: --t-end {args.t_end:g} is not a whole number of steps of --dt {args.dt:g}; "
+              f"integrating {n:,} steps to t = {n * args.dt:g}", file=sys.stderr)
     return n
 
 

@@ -245,8 +245,11 @@ def run(args):
     inputs = _inputs(args)
     cases = _cases(inputs)
     n = len(cases["h"])
-    c.check_memory(n, BYTES_PER_CASE, args.max_memory or c.default_memory_limit(), steps=n, save_every=1,
-                   option="--chunk-cases with fewer cases per run, or fewer cases:")
+    limit = args.max_memory or c.default_memory_limit()
+    if n * BYTES_PER_CASE > limit:
+        raise InputError(f"the sweep's {n:,} cases need about {c.format_bytes(n * BYTES_PER_CASE)} of memory to "
+                         f"merge but the limit is {c.format_bytes(limit)} (--max-memory); split it into sweeps of "
+                         f"at most {limit // BYTES_PER_CASE:,} cases (fewer --states/--ratios/--dt or --samples)")
     when = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
     out, resumed = _prepare_dir(args, inputs, when)
     for stale in out.glob(".*.tmp"):  # temporary files of a killed run
