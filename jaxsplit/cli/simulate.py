@@ -74,7 +74,8 @@ def add_parser(sub):
                    help="duration; steps = round(T / |H|)")
     g = p.add_argument_group("output")
     g.add_argument("--save-every", type=c.positive_int, default=1, metavar="K",
-                   help="keep every K-th state (and the last one) (default 1)")
+                   help="keep every K-th state (and the last one); the reported errors are maxima over "
+                        "the kept states (default 1)")
     g.add_argument("--out", metavar="PATH", help="trajectory file (.npz or .csv)")
     g.add_argument("--format", choices=FORMATS, help="trajectory format (default: from the suffix of --out, else npz)")
     g.add_argument("--figure", metavar="PNG", help="figure path (default: --out with suffix .png)")
@@ -303,10 +304,12 @@ def _print_summary(s, axis):
     print(f"jaxsplit simulate: {s['scheme']} (order {s['order']}), {split} split, h = {s['dt']:g}, "
           f"{s['steps']:,} steps to t = {s['t_end']:g}")
     print(f"  body {body}; m0 = ({c.fmt_vec(s['m0'])})")
-    print(f"  max relative energy error    {s['energy_error_max']:.3e}")
-    print(f"  max relative Casimir error   {s['casimir_error_max']:.3e}")
+    every = "" if s["save_every"] == 1 else f", every {s['save_every']:,}th step"
+    print(f"  over the {s['saved_states']:,} saved states{every}:")
+    print(f"  max relative energy error    {s['energy_error_max']:.3e}   max|H/H0 - 1|")
+    print(f"  max relative Casimir error   {s['casimir_error_max']:.3e}   max|C/C0 - 1|")
     if s["exact_error_max"] is not None:
-        print(f"  max error vs exact solution  {s['exact_error_max']:.3e}  (max-norm over the saved states)")
+        print(f"  max error vs exact solution  {s['exact_error_max']:.3e}   max|m - m_exact| (symmetric body)")
     rate = s["steps_per_second"]
     print(f"  {s['steps']:,} steps in {s['seconds']:.2f} s" + (f" ({rate:,.0f} steps/s, compilation included)"
                                                               if rate and math.isfinite(rate) else ""))
