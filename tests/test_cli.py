@@ -273,3 +273,21 @@ def test_default_outputs_in_an_unwritable_directory_still_run(capsys, monkeypatc
 def test_figure_only(capsys, tmp_path):
     assert main(["simulate", "--steps", "10", "--figure", str(tmp_path / "f.png"), "--quiet"]) == 0
     assert [p.name for p in tmp_path.iterdir()] == ["f.png"]
+
+
+@pytest.mark.parametrize("command", MINE)
+def test_help_examples_parse(command):
+    """Every example line of --help is a valid invocation (options and values parse)."""
+    import shlex
+
+    from jaxsplit.cli import _load, build_parser
+
+    epilog = _load(command).EXAMPLES
+    text = epilog.replace("\\\n", " ")
+    examples = [line.split("#")[0].strip() for line in text.splitlines() if line.strip().startswith("jaxsplit ")]
+    examples = [e for e in examples if "..." not in e and "COMMAND" not in e]
+    assert examples
+    parser = build_parser()
+    for example in examples:
+        args = parser.parse_args(shlex.split(example)[1:])
+        assert args.command == command

@@ -126,3 +126,22 @@ def test_resume_refuses_different_inputs(uninterrupted, capsys):
     assert main(changed + ["--out", str(uninterrupted), "--resume"]) == 2
     err = capsys.readouterr().err
     assert "different inputs" in err and "t_end: was 200.0, now 100.0" in err
+
+
+def test_results_hold_the_cases_and_the_library_results(uninterrupted):
+    from jaxsplit._sweep import sweep, sweep_cases
+
+    with np.load(uninterrupted / "results.npz") as z:
+        results = {k: z[k] for k in z.files}
+    meta = json.loads(str(results.pop("metadata")))
+    assert meta["inputs"]["scheme"] == "lie-trotter" and meta["inputs"]["t_end"] == 200.0
+    cases = sweep_cases(states=160, ratios=[(1.0, 0.5)], step_sizes=[0.01], dtype=np.float64)
+    for key, value in cases.items():
+        np.testing.assert_array_equal(results[f"case_{key}"], value)
+    # Chunk 7 equals the library called directly on the same slice of cases.
+    piece = {k: v[28:32] for k, v in cases.items()}
+    direct = sweep("lie-trotter", piece, t_end=200.0, reference_scheme="strang", chunk_size=4)
+    for key, value in direct.items():
+        np.testing.assert_array_equal(results[key][28:32], value)
+    summary = json.loads((uninterrupted / "summary.json").read_text())
+    assert summary["cases"] == 160 and summary["energy_error"]["max"] == np.max(results["energy_error"])

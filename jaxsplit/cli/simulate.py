@@ -31,8 +31,10 @@ EXAMPLES = """\
 examples:
   jaxsplit simulate                                   # the paper's symmetric body, Lie-Trotter
   jaxsplit simulate --scheme strang --dt 0.05 --t-end 500 --out run.npz
-  jaxsplit simulate --inertia 2,1,0.6667 --m0 0.4536,0,0.8912 --scheme kahan-li-6 \\
+  jaxsplit simulate --inertia 3,2,1.5 --m0 0.2,0.9,0.3 --scheme kahan-li-6 \\
                     --split casimir --steps 1e6 --save-every 100 --out asym.csv
+  jaxsplit simulate --inertia 2,1,0.6667 --m0 0.4536,0,0.8912 --allow-nonphysical \\
+                    --scheme strang --dt 0.1 --t-end 1000    # the GNI standard case
   jaxsplit simulate --json --no-save                  # one JSON object, no files
   jaxsplit simulate --dt -0.01 --steps 100            # backwards in time
 
