@@ -1,0 +1,208 @@
+"""The composer and the scan stepper: reference errors, reversibility, merging, dtypes,
+no recompilation, jit/vmap/grad, saving, backward runs, generic PyTree states."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxsplit
+from jaxsplit import InputError, RigidBody
+
+REVERSIBILITY_TOL = 1e-14
+MERGE_TOL = 1e-12
+ROUNDOFF = 1e-13
+ACCUMULATED_ROUNDOFF = 1e-12  # 2 x 500 steps x 34 rotations
+TABLE_RTOL = 0.05  # the reference table prints two significant digits
+FD_RTOL = 1e-6
+
+STANDARD = RigidBody(jnp.asarray(jaxsplit.STANDARD_CASE.inertia))
+M0 = jnp.asarray(jaxsplit.STANDARD_CASE.m0)
+REFERENCE = np.asarray(jaxsplit.STANDARD_CASE.reference)
+SCHEMES = list(jaxsplit.schemes)
+SPLITS = [(name, split) for name in SCHEMES for split in ("axes", "casimir")
+          if jaxsplit.schemes[name].pieces_allowed(3 if split == "axes" else 2)]
+
+
+def random_unit_states(n, seed=0):
+    m = jax.random.normal(jax.random.PRNGKey(seed), (n, 3))
+    return m / jnp.linalg.norm(m, axis=1, keepdims=True)
+
+
+# (scheme, split, shift axis, steps, error at T = 10) from shared/reference/coefficients.md
+REFERENCE_TABLE = [
+    ("strang", "axes", None, 320, 3.7e-4), ("strang", "axes", None, 640, 9.2e-5),
+    ("triple-jump-4", "axes", None, 160, 6.5e-6), ("suzuki-5", "axes", None, 80, 5.3e-7),
+    ("mclachlan-ss5", "axes", None, 80, 2.6e-6), ("mclachlan-m4", "axes", None, 80, 1.4e-6),
+    ("blanes-moan-s6", "axes", None, 80, 1.6e-7), ("yoshida-6a", "axes", None, 80, 6.0e-9),
+    ("kahan-li-6", "axes", None, 80, 5.7e-9), ("blanes-moan-s10", "axes", None, 40, 2.8e-8),
+    ("mclachlan-ss15", "axes", None, 40, 1.2e-9), ("kahan-li-8", "axes", None, 40, 1.1e-10),
+    ("sofroniou-spaletta-10", "axes", None, 10, 5.9e-9),
+    ("strang", "casimir", 3, 160, 2.6e-4), ("triple-jump-4", "casimir", 3, 160, 2.5e-7),
+    ("blanes-moan-s6-prk", "casimir", 3, 80, 1.1e-8), ("kahan-li-6", "casimir", 3, 80, 2.1e-10),
+    ("blanes-moan-s10-prk", "casimir", 3, 40, 2.3e-10),
+]
+
+
+@pytest.mark.parametrize("name, split, shift, steps, expected", REFERENCE_TABLE)
+def test_reproduces_the_reference_error_table(name, split, shift, steps, expected):
+    """Independent check of composition order and conventions (50-digit-verified table)."""
+    step = jaxsplit.splitting(STANDARD, name, split, **({"shift_axis": shift} if shift else {}))
+    error = np.abs(np.asarray(jaxsplit.integrate(step, M0, 10.0 / steps, steps)) - REFERENCE).max()
+    assert abs(error / expected - 1) <= TABLE_RTOL
+
+
+def test_automatic_casimir_shift_beats_the_other_axes():
+    """The middle axis minimises |c_a c_b|; measured on the standard case at equal cost."""
+    errors = {}
+    for shift in ("auto", 1, 2, 3):
+        step = jaxsplit.splitting(STANDARD, "strang", "casimir", shift_axis=shift)
+        errors[shift] = np.abs(np.asarray(jaxsplit.integrate(step, M0, 0.0625, 160)) - REFERENCE).max()
+    assert errors["auto"] == errors[2] < min(errors[1], errors[3])
+
+
+def test_automatic_shift_is_exact_for_a_symmetric_body():
+    body = RigidBody(jnp.asarray(jaxsplit.PAPER_BODY))
+    m0 = jnp.asarray(jaxsplit.PAPER_M0)
+    step = jaxsplit.splitting(body, "lie-trotter", "casimir")
+    exact = jaxsplit.symmetric_solution(body, m0, 50.0)
+    assert np.abs(jaxsplit.integrate(step, m0, 0.5, 100) - exact).max() < ROUNDOFF
+
+
+def test_rotation_counts_after_merging():
+    """Strang: 5 rotations (4 across steps) on the axes split, 3 (2) on the Casimir split."""
+    axes = jaxsplit.splitting(STANDARD, "strang")
+    casimir = jaxsplit.splitting(STANDARD, "strang", "casimir")
+    assert (len(axes.word), axes.flows_per_step) == (5, 4)
+    assert (len(casimir.word), casimir.flows_per_step) == (3, 2)
+    assert len(jaxsplit.splitting(STANDARD, "strang", merge_flows=False).word) == 6
+
+
+@pytest.mark.parametrize("name, split", [s for s in SPLITS if jaxsplit.schemes[s[0]].symmetric])
+def test_symmetric_schemes_are_time_reversible(name, split):
+    step = jaxsplit.splitting(STANDARD, name, split)
+    states = random_unit_states(16)
+    for h in (1e-3, 0.1, 1.0):
+        back = jax.vmap(lambda m: step(step(m, h), -h))(states)
+        assert np.abs(back - states).max() <= REVERSIBILITY_TOL
+
+
+def test_lie_trotter_is_not_reversible_but_its_adjoint_inverts_it():
+    lie = jaxsplit.splitting(STANDARD, "lie-trotter")
+    adjoint = jaxsplit.splitting(STANDARD, "lie-trotter-adjoint")
+    m = random_unit_states(1)[0]
+    assert np.abs(lie(lie(m, 0.1), -0.1) - m).max() > 1e-6
+    assert np.abs(adjoint(lie(m, 0.1), -0.1) - m).max() <= REVERSIBILITY_TOL
+
+
+@pytest.mark.parametrize("name, split", SPLITS)
+def test_merged_and_unmerged_compositions_agree(name, split):
+    merged = jaxsplit.splitting(STANDARD, name, split)
+    unmerged = jaxsplit.splitting(STANDARD, name, split, merge_flows=False)
+    a = jaxsplit.integrate(merged, M0, 0.05, 1000)
+    b = jaxsplit.integrate(unmerged, M0, 0.05, 1000)
+    assert np.abs(a - b).max() <= MERGE_TOL
+
+
+@pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64])
+def test_output_dtype_follows_the_input(dtype):
+    step = jaxsplit.splitting(STANDARD, "kahan-li-6", "casimir")
+    x = M0.astype(dtype)
+    assert step(x, 0.1).dtype == dtype
+    assert jaxsplit.integrate(step, x, 0.1, 10).dtype == dtype
+    traj = jaxsplit.integrate(step, x, 0.1, 10, save_every=3)
+    assert traj.x.dtype == dtype and traj.t.dtype == dtype
+
+
+def test_a_new_step_size_or_body_does_not_recompile():
+    step = jaxsplit.splitting(STANDARD, "strang")
+    jaxsplit.integrate(step, M0, 0.1, 50)
+    compiled = jaxsplit._integrate._run._cache_size()
+    jaxsplit.integrate(step, M0, 0.05, 50)
+    jaxsplit.integrate(jaxsplit.splitting(RigidBody([3.0, 2.0, 1.0]), "strang"), M0, -0.2, 50)
+    assert jaxsplit._integrate._run._cache_size() == compiled
+    jaxsplit.integrate(step, M0, 0.1, 51)  # the step count is static: this one compiles
+    assert jaxsplit._integrate._run._cache_size() == compiled + 1
+
+
+def test_vmap_over_initial_conditions_and_bodies_matches_a_loop():
+    states = random_unit_states(4, seed=1)
+    inertias = jnp.array([[2.0, 1.0, 0.7], [1.0, 1.5, 2.0], [3.0, 2.5, 1.0], [1.2, 1.1, 1.0]])
+
+    def run(inertia, m0):
+        step = jaxsplit.splitting(RigidBody(inertia), "blanes-moan-s6-prk", "casimir", shift_axis=2)
+        return jaxsplit.integrate(step, m0, 0.05, 200)
+
+    batched = jax.jit(jax.vmap(run))(inertias, states)
+    looped = jnp.stack([run(i, m) for i, m in zip(inertias, states)])
+    assert np.abs(batched - looped).max() <= ROUNDOFF
+
+
+def test_gradient_through_the_integrator_matches_finite_differences():
+    def loss(inertia, m0):
+        step = jaxsplit.splitting(RigidBody(inertia), "strang")
+        return jnp.sum(jaxsplit.integrate(step, m0, 0.05, 400) ** 3)
+
+    inertia = jnp.asarray(jaxsplit.STANDARD_CASE.inertia)
+    grads = jax.grad(loss, argnums=(0, 1))(inertia, M0)
+    for arg, grad in enumerate(grads):
+        for k in range(3):
+            e = jnp.zeros(3).at[k].set(1e-6)
+            args_plus = [inertia, M0]
+            args_minus = [inertia, M0]
+            args_plus[arg] = args_plus[arg] + e
+            args_minus[arg] = args_minus[arg] - e
+            fd = (loss(*args_plus) - loss(*args_minus)) / 2e-6
+            assert abs(grad[k] - fd) <= FD_RTOL * max(1.0, abs(fd))
+
+
+def test_negative_step_integrates_backwards():
+    step = jaxsplit.splitting(STANDARD, "kahan-li-8", "casimir")
+    there = jaxsplit.integrate(step, M0, 0.1, 500)
+    back = jaxsplit.integrate(step, there, -0.1, 500)
+    assert np.abs(back - M0).max() <= ACCUMULATED_ROUNDOFF
+
+
+def test_saving_keeps_the_start_every_kth_state_and_the_end():
+    step = jaxsplit.splitting(STANDARD, "strang")
+    traj = jaxsplit.integrate(step, M0, 0.1, 10, save_every=4)
+    np.testing.assert_allclose(traj.t, [0.0, 0.4, 0.8, 1.0], rtol=1e-15)
+    for t, x in zip(traj.t, traj.x):
+        n = int(round(float(t) / 0.1))
+        assert np.abs(x - jaxsplit.integrate(step, M0, 0.1, n)).max() <= ROUNDOFF
+    assert jaxsplit.integrate(step, M0, 0.1, 0) is not None
+
+
+@pytest.mark.parametrize("bad", [-1, 2.5, True, "10"])
+def test_bad_step_counts_are_refused(bad):
+    step = jaxsplit.splitting(STANDARD, "strang")
+    with pytest.raises(InputError, match="n_steps"):
+        jaxsplit.integrate(step, M0, 0.1, bad)
+    with pytest.raises(InputError, match="save_every"):
+        jaxsplit.integrate(step, M0, 0.1, 10, save_every=0)
+
+
+def test_composer_is_generic_over_pytree_states_and_user_flows():
+    """Harmonic oscillator as drift and kick on a dict state: Strang is the leapfrog."""
+
+    def drift(state, t, params):
+        return {"q": state["q"] + t * state["p"], "p": state["p"]}
+
+    def kick(state, t, params):
+        return {"q": state["q"], "p": state["p"] - t * params * state["q"]}
+
+    x0 = {"q": jnp.array(1.0), "p": jnp.array(0.0)}
+    errors = []
+    for n in (100, 200):
+        step = jaxsplit.compose([kick, drift], "strang", params=jnp.array(1.0))
+        x = jaxsplit.integrate(step, x0, 1.0 / n, n)
+        errors.append(abs(float(x["q"]) - np.cos(1.0)))
+    assert abs(np.log2(errors[0] / errors[1]) - 2) < 0.05
+
+
+def test_any_pure_function_can_be_stepped():
+    def euler(m, h):
+        return m + h * STANDARD.vector_field(m)
+
+    m = jaxsplit.integrate(euler, M0, 0.01, 100)
+    assert float(jnp.sum(m * m)) > float(jnp.sum(M0 * M0))  # Euler inflates |m|
