@@ -140,7 +140,8 @@ def test_results_hold_the_cases_and_the_library_results(uninterrupted):
         np.testing.assert_array_equal(results[f"case_{key}"], value)
     # Chunk 7 equals the library called directly on the same slice of cases.
     piece = {k: v[28:32] for k, v in cases.items()}
-    direct = sweep("lie-trotter", piece, t_end=200.0, reference_scheme="strang", chunk_size=4)
+    direct = sweep("lie-trotter", piece, t_end=200.0, reference_scheme="strang", chunk_size=4,
+                   reference_angle=meta["inputs"]["reference_angle"])
     for key, value in direct.items():
         np.testing.assert_array_equal(results[key][28:32], value)
     summary = json.loads((uninterrupted / "summary.json").read_text())

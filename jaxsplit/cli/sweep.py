@@ -84,7 +84,17 @@ def _range(name):
     return parse
 
 
+def _library_default(name):
+    """A keyword default of ``jaxsplit._sweep.sweep``, so the CLI never drifts from the library."""
+    import inspect
+
+    from .._sweep import sweep
+
+    return inspect.signature(sweep).parameters[name].default
+
+
 def add_parser(sub):
+    ref_scheme, ref_angle = _library_default("reference_scheme"), _library_default("reference_angle")
     p = sub.add_parser(
         "sweep", help="evaluate a scheme over many cases, in resumable chunks",
         description="Evaluate one scheme over a grid (or random sample) of initial states, "
@@ -98,10 +108,10 @@ def add_parser(sub):
                    help="axis of the Casimir shift, with --split casimir (default auto)")
     g.add_argument("--t-end", type=c.positive_float, default=10.0, metavar="T",
                    help="integration time of every case (default 10)")
-    g.add_argument("--reference-scheme", default="kahan-li-8", metavar="NAME",
-                   help="scheme of the reference solution, Casimir split (default kahan-li-8)")
-    g.add_argument("--reference-angle", type=c.positive_float, default=0.05, metavar="RAD",
-                   help="largest rotation per reference step, <= 0.5 (default 0.05)")
+    g.add_argument("--reference-scheme", default=ref_scheme, metavar="NAME",
+                   help=f"scheme of the reference solution, Casimir split (default {ref_scheme})")
+    g.add_argument("--reference-angle", type=c.positive_float, default=ref_angle, metavar="RAD",
+                   help=f"largest rotation per reference step, <= 0.5 (default {ref_angle:g})")
     g = p.add_argument_group("cases")
     g.add_argument("--sampling", choices=("grid", "random"), default="grid", help="(default grid)")
     g.add_argument("--states", type=c.positive_int, default=16, metavar="N",
