@@ -134,3 +134,20 @@ def test_no_traceback_through_the_real_entry_point(argv, words):
     assert len(lines) == 1, proc.stderr
     for word in words:
         assert word in lines[0]
+
+
+def _write_malformed(tmp_path):
+    import numpy as np
+
+    (tmp_path / "garbage.npz").write_text("not a zip file")
+    np.savez(tmp_path / "no_m.npz", t=np.arange(3.0))
+    np.savez(tmp_path / "nan.npz", t=np.arange(10.0), m=np.full((10, 3), np.nan))
+
+
+@pytest.mark.parametrize("name,words", [("garbage.npz", ["garbage.npz"]), ("no_m.npz", ["no_m.npz", "m"]),
+                                        ("nan.npz", ["finite"]), ("missing.npz", ["missing.npz"])])
+def test_fit_rejects_malformed_data_files(name, words, capsys, tmp_path):
+    pytest.importorskip("jaxsplit.cli.fit")  # owned by the fitting work; skipped until it exists
+    _write_malformed(tmp_path)
+    rc = main(["fit", "--data", str(tmp_path / name)])
+    _assert_one_line_error(rc, capsys.readouterr(), words)
