@@ -105,7 +105,7 @@ def _error_panel(ax, t, err, label, color):
         ax.set_ylim(max(_FLOOR / 2, min(finite.min(), top / 10) / 3), top * 3)
         ax.text(0.99, 0.04, f"max {np.nanmax(np.abs(err)):.2e}", transform=ax.transAxes,
                 ha="right", va="bottom", fontsize=8, color="0.25",
-                bbox=dict(facecolor="white", edgecolor="none", alpha=0.8, pad=1))
+                bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.8, "pad": 1})
 
 
 def simulate_figure(t, m, energy_error, casimir_error, inertia, *, title="", exact_error=None):

@@ -126,7 +126,7 @@ def test_output_path_is_a_directory(capsys, tmp_path):
 def test_no_traceback_through_the_real_entry_point(argv, words):
     env = dict(os.environ, PYTHONWARNINGS="ignore")
     proc = subprocess.run([sys.executable, "-m", "jaxsplit.cli", *argv], capture_output=True, text=True,
-                          env=env, timeout=120)
+                          env=env, timeout=120, check=False)
     assert proc.returncode == 2
     assert proc.stdout == ""
     assert "Traceback" not in proc.stderr

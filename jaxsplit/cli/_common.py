@@ -308,7 +308,7 @@ def check_memory(n_saved: int, bytes_per_saved: int, limit: int, *, steps: int, 
 def _fmt_seconds(s: float) -> str:
     if not math.isfinite(s):
         return "?"
-    s = int(round(s))
+    s = round(s)
     h, rem = divmod(s, 3600)
     m, sec = divmod(rem, 60)
     return f"{h}:{m:02d}:{sec:02d}" if h else f"{m:d}:{sec:02d}"
@@ -348,7 +348,7 @@ class Progress:
             rate = done / elapsed if elapsed > 0 else float("nan")
         eta = (self.total - done) / rate if rate and rate > 0 else float("nan")
         frac = done / self.total if self.total else 1.0
-        filled = int(round(self.width * frac))
+        filled = round(self.width * frac)
         bar = "#" * filled + "-" * (self.width - filled)
         return (f"[{bar}] {100 * frac:5.1f}%  {done:,}/{self.total:,} {self.unit}  "
                 f"{rate:,.0f} {self.unit}/s  elapsed {_fmt_seconds(elapsed)}  ETA {_fmt_seconds(eta)}")

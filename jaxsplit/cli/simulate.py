@@ -165,7 +165,6 @@ def _default_outputs(args, when: str):
 
 
 def run(args):
-    import jax
     import jax.numpy as jnp
 
     from .._exact import symmetric_solution, symmetry_axis
