@@ -291,3 +291,17 @@ def test_help_examples_parse(command):
     for example in examples:
         args = parser.parse_args(shlex.split(example)[1:])
         assert args.command == command
+
+
+def test_memory_refusal_suggests_a_save_every_that_fits():
+    import re
+
+    from jaxsplit import InputError
+    from jaxsplit.cli._common import check_memory
+    from jaxsplit.cli.simulate import BYTES_PER_SAVED
+
+    steps, limit = 10**9, 2**20
+    with pytest.raises(InputError) as err:
+        check_memory(steps + 2, BYTES_PER_SAVED, limit, steps=steps, save_every=1)
+    k = int(re.search(r"--save-every (\d+)", str(err.value)).group(1))
+    check_memory(steps // k + 2, BYTES_PER_SAVED, limit, steps=steps, save_every=k)  # fits: no error
