@@ -75,7 +75,8 @@ def _sphere_panel(ax, m, inertia, radius):
     x, y, front = m @ e1, m @ e2, (m @ v) >= 0
     xf, yf = np.where(front, x, np.nan), np.where(front, y, np.nan)
     xb, yb = np.where(~front, x, np.nan), np.where(~front, y, np.nan)
-    ax.plot(xb, yb, color="tab:blue", lw=0.8, alpha=0.35, ls="--", zorder=2, label="trajectory (far side)")
+    ax.plot(xb, yb, color="tab:blue", lw=0.8, alpha=0.35, ls="--", zorder=2,
+            label="trajectory (far side)" if (~front).any() else None)
     ax.plot(xf, yf, color="tab:blue", lw=1.4, zorder=4, label="trajectory")
     ax.plot(x[0], y[0], "o", color="tab:green", ms=6, zorder=5, label="start")
     ax.plot(x[-1], y[-1], "s", color="tab:red", ms=5, zorder=5, label="end")
