@@ -26,7 +26,13 @@ def _view_basis(m: np.ndarray):
     mean = m.mean(axis=0)
     oblique = np.array([1.0, 0.8, 0.9]) / np.linalg.norm([1.0, 0.8, 0.9])
     norm = np.linalg.norm(mean)
-    v = oblique if norm < 1e-12 else 0.45 * mean / norm + 0.55 * oblique
+    if norm > 1e-12:
+        direction = mean / norm
+        tilt = oblique - (oblique @ direction) * direction  # tilt the view off the mean a little
+        tilt_norm = np.linalg.norm(tilt)
+        v = direction if tilt_norm < 1e-12 else 0.8 * direction + 0.6 * tilt / tilt_norm
+    else:
+        v = oblique
     v /= np.linalg.norm(v)
     up = np.array([0.0, 0.0, 1.0])
     if abs(v @ up) > 0.95:
