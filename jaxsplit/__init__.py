@@ -41,6 +41,7 @@ from ._tune import order4_coefficients as order4_coefficients
 from ._tune import random_bodies as random_bodies
 from ._tune import tune_scheme as tune_scheme
 from ._splitting import AxisRotation as AxisRotation
+from ._splitting import rigid_body_flows as rigid_body_flows
 from ._splitting import splitting as splitting
 from ._hamilton_poisson import HamiltonPoisson as HamiltonPoisson
 from ._hamilton_poisson import canonical_system as canonical_system
