@@ -156,7 +156,7 @@ def test_first_nonfinite_narrows_down_to_the_step():
         assert k == bad and np.all(np.asarray(last) == 2.0 ** (bad - 1))
 
 
-@pytest.mark.parametrize("save_every,chunk", [(1, 64), (7, 70), (1000, 1000)])
+@pytest.mark.parametrize("save_every,chunk", [(1, 64), (7, 70), (1000, 1000), (250, 64), (3000, 64)])
 def test_chunked_run_equals_one_run(save_every, chunk):
     body = jaxsplit.RigidBody(jnp.asarray([3.0, 2.0, 1.5]))
     step = jaxsplit.splitting(body, "strang")
@@ -305,3 +305,13 @@ def test_memory_refusal_suggests_a_save_every_that_fits():
         check_memory(steps + 2, BYTES_PER_SAVED, limit, steps=steps, save_every=1)
     k = int(re.search(r"--save-every (\d+)", str(err.value)).group(1))
     check_memory(steps // k + 2, BYTES_PER_SAVED, limit, steps=steps, save_every=k)  # fits: no error
+
+
+@pytest.mark.parametrize("save_every,chunk", [(100, 300), (5000, 100)])
+def test_chunked_run_stops_at_the_first_nonfinite_step(save_every, chunk):
+    bad = _first_overflow_step()
+    res = run_chunked(lambda x, h: 2.0 * x, jnp.ones(3), 0.1, 5000, save_every, chunk=chunk)
+    assert res.nonfinite_step == bad and res.completed == bad - 1
+    expected = [*range(0, bad, save_every), bad - 1] if (bad - 1) % save_every else list(range(0, bad, save_every))
+    assert list(res.steps) == expected
+    np.testing.assert_array_equal(res.x, 2.0 ** res.steps[:, None] * np.ones((1, 3)))

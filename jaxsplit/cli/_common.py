@@ -389,15 +389,18 @@ class RunResult(NamedTuple):
 
 def chunk_size(n_steps: int, save_every: int, flows_per_step: int = 1,
                target_flows: int | None = None) -> int:
-    """Steps per chunk: a multiple of ``save_every`` doing about ``target_flows`` flows."""
+    """Steps per chunk doing about ``target_flows`` flows: a multiple of ``save_every`` when
+    states are saved that often, else a plain step count (saves then fall on chunk ends)."""
     target_flows = TARGET_FLOWS_PER_CHUNK if target_flows is None else target_flows
     per = max(1, target_flows // max(1, flows_per_step))
-    chunk = max(save_every, (per // save_every) * save_every)
+    if save_every > per:
+        return min(per, n_steps)
+    chunk = (per // save_every) * save_every
     return min(chunk, max(save_every, -(-n_steps // save_every) * save_every))
 
 
 def _finite_rows(x: np.ndarray) -> np.ndarray:
-    return np.all(np.isfinite(x.reshape(len(x), -1)), axis=1)
+    return np.all(np.isfinite(x.reshape(len(x), -1)), axis=1) if len(x) else np.ones(0, bool)
 
 
 def first_nonfinite(step, x, h, n: int) -> tuple[int, np.ndarray]:
@@ -428,32 +431,47 @@ def run_chunked(step, x0, h, n_steps: int, save_every: int, *, flows_per_step: i
     chunk that the state is finite. Saves ``x0``, every ``save_every``-th state and the last
     one, like ``integrate(..., save_every=...)``. A non-finite state stops the run at the
     first bad step; Ctrl-C stops it after the current chunk; either way the states computed
-    so far are returned."""
+    so far are returned (with the last good state)."""
     import jax.numpy as jnp
 
     from .._integrate import integrate
 
     chunk = chunk or chunk_size(n_steps, save_every, flows_per_step)
-    if chunk % save_every:
-        raise ValueError("chunk must be a multiple of save_every")
+    aligned = chunk % save_every == 0  # else save_every > chunk: saves fall on chunk ends
     start = time.perf_counter()
     x = jnp.asarray(x0)
     steps, saved = [np.zeros(1, dtype=np.int64)], [np.asarray(x)[None]]
     done, nonfinite, interrupted = 0, None, False
+
+    def last_saved():
+        return int(steps[-1][-1]) if len(steps[-1]) else int(np.concatenate(steps)[-1])
+
     try:
         while done < n_steps:
-            n = min(chunk, n_steps - done)
-            traj = integrate(step, x, h, n, save_every=save_every)
-            xs = np.asarray(traj.x)[1:]
-            local = np.arange(1, len(xs) + 1, dtype=np.int64) * save_every
-            local[-1] = n
-            ok = _finite_rows(xs)
-            if not ok.all():
+            if aligned:
+                n = min(chunk, n_steps - done)
+                traj = integrate(step, x, h, n, save_every=save_every)
+                xs = np.asarray(traj.x)[1:]
+                local = np.arange(1, len(xs) + 1, dtype=np.int64) * save_every
+                local[-1] = n
+                x_end = traj.x[-1]
+            else:
+                next_save = (done // save_every + 1) * save_every
+                n = min(chunk, next_save - done, n_steps - done)
+                x_end = integrate(step, x, h, n)
+                is_save = done + n == next_save or done + n == n_steps
+                xs = np.asarray(x_end)[None]
+                local = np.array([n], dtype=np.int64)
+                if not np.all(np.isfinite(xs)):
+                    is_save = True  # handled below
+                if not is_save:
+                    xs, local = xs[:0], local[:0]
+            if not _finite_rows(xs).all():
                 bad, last = first_nonfinite(step, x, h, n)
                 keep = local < bad
                 steps.append(done + local[keep])
                 saved.append(xs[keep])
-                if bad - 1 > (done + local[keep][-1] if keep.any() else done):
+                if done + bad - 1 > last_saved():
                     steps.append(np.array([done + bad - 1]))
                     saved.append(np.asarray(last)[None])
                 nonfinite = done + bad
@@ -461,12 +479,15 @@ def run_chunked(step, x0, h, n_steps: int, save_every: int, *, flows_per_step: i
                 break
             steps.append(done + local)
             saved.append(xs)
-            x = traj.x[-1]
+            x = x_end
             done += n
             if progress is not None:
                 progress.update(done)
     except KeyboardInterrupt:
         interrupted = True
+        if done > last_saved():  # keep the last state reached
+            steps.append(np.array([done]))
+            saved.append(np.asarray(x)[None])
     finally:
         if progress is not None:
             progress.close(done if not interrupted else None)
