@@ -51,6 +51,10 @@ the same) or --force (start it over).
 """
 
 
+EXIT_HELP = ("exit status: 0 success; 2 bad input (one line on stderr, nothing run); 130 interrupted "
+             "(Ctrl-C or SIGTERM: finished chunks are kept, --resume continues)")
+
+
 def _ratio_pair(text):
     parts = [p.strip() for p in str(text).split(",")]
     if len(parts) != 2:
@@ -100,7 +104,7 @@ def add_parser(sub):
         description="Evaluate one scheme over a grid (or random sample) of initial states, "
                     "inertia ratios and step sizes; results are written chunk by chunk so an "
                     "interrupted sweep resumes with --resume.",
-        epilog=EXAMPLES + "\n" + c.EXIT_CODES_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+        epilog=EXAMPLES + "\n" + EXIT_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     g = p.add_argument_group("method")
     g.add_argument("--scheme", default="strang", help="any name from `jaxsplit schemes` (default strang)")
     g.add_argument("--split", choices=("axes", "casimir"), default="axes", help="(default axes)")
