@@ -38,6 +38,7 @@ backward pass: memory O(n/B + B), O(√n) with the default B = ⌈√n⌉ (measu
 observations the same way.
 """
 
+import functools
 import math
 import time
 from typing import NamedTuple
@@ -144,6 +145,9 @@ def _predict(scheme, shift, n_sub: int, log_inertia, m0, dts):
     return jnp.concatenate([m0[None], jax.lax.scan(interval, m0, dts)[1]])
 
 
+_predict_jit = jax.jit(_predict, static_argnums=(0, 1, 2))
+
+
 class FitResult(NamedTuple):
     """Outcome of ``fit_inertia`` (numpy arrays and floats; see the module docstring)."""
 
@@ -184,7 +188,7 @@ def _lbfgs(fun, params, max_iter: int, tol: float):
     def cond(carry):
         _, state, k = carry
         grad = optax.tree_utils.tree_get(state, "grad")
-        gnorm = optax.tree_utils.tree_l2_norm(grad)
+        gnorm = optax.tree_utils.tree_norm(grad)
         return (k == 0) | ((k < max_iter) & (gnorm >= tol))
 
     p, _, k = jax.lax.while_loop(cond, body, (params, opt.init(params), 0))
@@ -208,6 +212,53 @@ def _gauge_shift(w, m0, energy, inertia1):
     if energy is not None:
         return (2 * energy - jnp.sum(w * m0 * m0)) / jnp.sum(m0 * m0)
     return 1 / inertia1 - w[0]
+
+
+def _unpack(p, log_i1, obs, fit_m0: bool):
+    log_inertia = jnp.concatenate([log_i1[None], p["log_i23"]])
+    return log_inertia, (p["m0"] if fit_m0 else obs[0])
+
+
+def _residual_fn(obs, dts, log_i1, config):
+    scheme, shift, n_sub, fit_m0 = config[:4]
+
+    def residuals(p):
+        log_inertia, m0 = _unpack(p, log_i1, obs, fit_m0)
+        return (_predict(scheme, shift, n_sub, log_inertia, m0, dts) - obs).reshape(-1)
+
+    return residuals
+
+
+@functools.partial(jax.jit, static_argnames=("config",))
+def _optimise(params, obs, dts, log_i1, config):
+    """Adam, then L-BFGS, on the mean squared misfit (one compilation per configuration
+    and data shape: a new data set of the same shape reuses it)."""
+    *_, adam_steps, adam_lr, lbfgs_iter, tol = config
+    residuals = _residual_fn(obs, dts, log_i1, config)
+
+    def loss(p):
+        r = residuals(p)
+        return jnp.mean(r * r)
+
+    params = _adam(loss, params, adam_steps, adam_lr)
+    params, k = _lbfgs(loss, params, lbfgs_iter, tol)
+    return params, k, loss(params)
+
+
+@functools.partial(jax.jit, static_argnames=("config",))
+def _curvature(params, obs, dts, log_i1, config):
+    """Residual Jacobian in the fitted parameters, RSS, and the Jacobian in (log I1, log I2, log I3)."""
+    residuals = _residual_fn(obs, dts, log_i1, config)
+    flat, unravel = jax.flatten_util.ravel_pytree(params)
+    jac = jax.jacfwd(lambda f: residuals(unravel(f)))(flat)
+    r = residuals(params)
+    scheme, shift, n_sub, fit_m0 = config[:4]
+    _, m0 = _unpack(params, log_i1, obs, fit_m0)
+
+    def full(log_inertia):
+        return (_predict(scheme, shift, n_sub, log_inertia, m0, dts) - obs).reshape(-1)
+
+    return jac, jnp.sum(r * r), jax.jacfwd(full)(jnp.concatenate([log_i1[None], params["log_i23"]]))
 
 
 def fit_inertia(t, m, *, energy: float | None = None, energy_sigma: float = 0.0,
@@ -251,45 +302,23 @@ def fit_inertia(t, m, *, energy: float | None = None, energy_sigma: float = 0.0,
     obs = jnp.asarray(m, dtype)
     log_i1 = jnp.asarray(-np.log(w_ref[0]), dtype)
 
-    def unpack(p):
-        log_inertia = jnp.concatenate([log_i1[None], p["log_i23"]])
-        return log_inertia, (p["m0"] if fit_m0 else obs[0])
-
-    def residuals(p):
-        log_inertia, m0 = unpack(p)
-        return (_predict(scheme, shift, n_sub, log_inertia, m0, dts) - obs).reshape(-1)
-
-    def loss(p):
-        r = residuals(p)
-        return jnp.mean(r * r)
-
-    params = {"log_i23": jnp.asarray(-np.log(w_ref[1:]), dtype), "m0": obs[0]}
-    if not fit_m0:
-        params = {"log_i23": params["log_i23"], "m0": jnp.zeros((0,), dtype)}
-
-    @jax.jit
-    def optimise(p):
-        p = _adam(loss, p, adam_steps, adam_lr)
-        p, k = _lbfgs(loss, p, lbfgs_iter, tol)
-        return p, k, loss(p)
-
-    params, iters, final = optimise(params)
+    params = {"log_i23": jnp.asarray(-np.log(w_ref[1:]), dtype),
+              "m0": obs[0] if fit_m0 else jnp.zeros((0,), dtype)}
+    config = (scheme, shift, n_sub, bool(fit_m0), int(adam_steps), float(adam_lr), int(lbfgs_iter), float(tol))
+    params, iters, final = _optimise(params, obs, dts, log_i1, config)
 
     # Gauss–Newton Hessian of the identifiable problem, and of the full log-inertia one.
     flat, unravel = jax.flatten_util.ravel_pytree(params)
-    jac = jax.jacfwd(lambda f: residuals(unravel(f)))(flat)
+    jac, rss, jfull = (np.asarray(a) for a in _curvature(params, obs, dts, log_i1, config))
     n_res, n_par = jac.shape
-    rss = float(jnp.sum(residuals(params) ** 2))
-    sigma2 = rss / max(n_res - n_par, 1)
-    cov = sigma2 * np.linalg.pinv(np.asarray(jac.T @ jac))
-    log_inertia_hat, m0_hat = unpack(params)
-
-    def full_residuals(log_inertia):
-        return (_predict(scheme, shift, n_sub, log_inertia, m0_hat, dts) - obs).reshape(-1)
-
-    jfull = np.asarray(jax.jacfwd(full_residuals)(log_inertia_hat))
+    sigma2 = float(rss) / max(n_res - n_par, 1)
+    cov = sigma2 * np.linalg.pinv(jac.T @ jac)
+    log_inertia_hat, m0_hat = _unpack(params, log_i1, obs, fit_m0)
     evals, evecs = np.linalg.eigh(jfull.T @ jfull)
     null = evecs[:, 0] * np.sign(evecs[:, 0].sum() or 1.0)
+
+    def unpack(p):
+        return _unpack(p, log_i1, obs, fit_m0)
 
     # Gauge map (flat params, energy) -> (ratios, differences), with its Jacobian.
     e_val = 0.0 if energy is None else float(energy)
@@ -303,7 +332,7 @@ def fit_inertia(t, m, *, energy: float | None = None, energy_sigma: float = 0.0,
 
     e_arr = jnp.asarray(e_val, dtype)
     out = np.asarray(gauge_map(flat, e_arr))
-    jg = np.asarray(jax.jacfwd(gauge_map, argnums=(0, 1))(flat, e_arr)[0])
+    jg = np.asarray(jax.jacfwd(gauge_map, argnums=0)(flat, e_arr))
     je = np.asarray(jax.jacfwd(gauge_map, argnums=1)(flat, e_arr))
     var = np.einsum("ij,jk,ik->i", jg, cov, jg) + je**2 * energy_sigma**2
     wg = out[4:]
@@ -339,7 +368,7 @@ def simulate_observations(inertia, m0, t, noise: float, *, seed: int = 0, scheme
     dtype = jnp.result_type(float)
     n_sub = max(1, math.ceil(float(np.max(np.diff(t))) / max_step))
     shift = int(np.argsort(1 / inertia, kind="stable")[1]) + 1
-    clean = jax.jit(_predict, static_argnums=(0, 1, 2))(schemes.resolve(scheme), shift, n_sub, jnp.log(jnp.asarray(inertia, dtype)),
-                     jnp.asarray(m0, dtype), jnp.asarray(np.diff(t), dtype))
+    clean = _predict_jit(schemes.resolve(scheme), shift, n_sub, jnp.log(jnp.asarray(inertia, dtype)),
+                         jnp.asarray(m0, dtype), jnp.asarray(np.diff(t), dtype))
     rng = np.random.default_rng(seed)
     return np.asarray(clean) + noise * rng.standard_normal((len(t), 3))
