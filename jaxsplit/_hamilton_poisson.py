@@ -154,7 +154,7 @@ def _ex31_energy(coefficients, x):
 
 def example_3_1(a=1.0, b=1.0, c=0.0) -> HamiltonPoisson:
     """Example 3.1: Π(x) = [[0, x₂], [−x₂, 0]], H = A x₁ + B x₂ + C, ẋ = (B x₂, −A x₂)."""
-    coefficients = jnp.asarray([a, b, c])
-    if not bool(jnp.all(jnp.isfinite(coefficients))):
+    coefficients = jnp.stack([jnp.asarray(a), jnp.asarray(b), jnp.asarray(c)]).astype(jnp.result_type(float))
+    if not isinstance(coefficients, jax.core.Tracer) and not bool(jnp.all(jnp.isfinite(coefficients))):
         raise InputError(f"A, B, C must be finite, got {(a, b, c)}")
     return HamiltonPoisson(_ex31_pi, Partial(_ex31_energy, coefficients), (), "example-3.1")

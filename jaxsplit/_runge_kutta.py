@@ -283,6 +283,68 @@ def runge_kutta(system, tableau: "ButcherTableau | str", *, max_iter: int = 50) 
     return RungeKutta(system, tableau, max_iter)
 
 
+@jax.tree_util.register_pytree_node_class
+@dataclasses.dataclass(frozen=True)
+class CoefficientRungeKutta:
+    """A Runge–Kutta step whose coefficients (A, b) are ARRAYS (PyTree leaves), not static data.
+
+    Every tableau, explicit or not, is solved by the same Newton iteration (for a strictly
+    lower-triangular A it terminates in at most s iterations), so one compilation serves a
+    whole family of tableaus of the same size: ``vmap`` over coefficients (pad smaller
+    tableaus with zero rows/weights), or differentiate with respect to them.
+    """
+
+    system: object
+    a: jax.Array
+    b: jax.Array
+    max_iter: int = 50
+
+    def __call__(self, x, h):
+        x = jnp.asarray(x)
+        if x.ndim != 1:
+            raise InputError(f"Runge-Kutta states must be vectors in R^n, got shape {x.shape}")
+        h = jnp.asarray(h, dtype=x.dtype)
+        a, b = jnp.asarray(self.a, dtype=x.dtype), jnp.asarray(self.b, dtype=x.dtype)
+        f = _field(self.system)
+        s, n = b.shape[0], x.shape[0]
+
+        def g(z):
+            k = z.reshape(s, n)
+            return (k - jax.vmap(f)(x[None, :] + h * (a @ k))).reshape(-1)
+
+        z = jax.lax.custom_root(g, jnp.tile(f(x), s), lambda g_, z_: _newton(g_, z_, self.max_iter)[0],
+                                _tangent_solve)
+        return x + h * (b @ z.reshape(s, n))
+
+    def tree_flatten(self):
+        return (self.system, self.a, self.b), (self.max_iter,)
+
+    @classmethod
+    def tree_unflatten(cls, aux, children):
+        return cls(*children, *aux)
+
+
+def runge_kutta_coefficients(system, a, b, *, max_iter: int = 50) -> CoefficientRungeKutta:
+    """An RK step from coefficient arrays ``a`` (s, s) and ``b`` (s,), which may be traced."""
+    a, b = jnp.asarray(a), jnp.asarray(b)
+    if a.ndim != 2 or a.shape[0] != a.shape[1] or b.shape != a.shape[:1]:
+        raise InputError(f"A must be s x s and b of length s, got shapes {a.shape} and {b.shape}")
+    _field(system)
+    return CoefficientRungeKutta(system, a, b, max_iter)
+
+
+def padded_coefficients(tableau: ButcherTableau, stages: int):
+    """(A, b) of ``tableau`` padded with zero stages to ``stages`` (same method)."""
+    s = tableau.stages
+    if stages < s:
+        raise InputError(f"cannot pad a {s}-stage tableau to {stages} stages")
+    a = np.zeros((stages, stages))
+    a[:s, :s] = np.asarray(tableau.a)
+    b = np.zeros(stages)
+    b[:s] = tableau.b
+    return a, b
+
+
 def explicit_euler(system) -> RungeKutta:
     """(2.4): x_{n+1} = x_n + h f(x_n)."""
     return runge_kutta(system, "explicit-euler")
