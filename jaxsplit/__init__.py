@@ -78,6 +78,9 @@ from ._tableau_checks import order_conditions as order_conditions
 from ._tableau_checks import rooted_trees as rooted_trees
 from ._tableau_checks import symplecticity_matrix as symplecticity_matrix
 from ._tableau_checks import tableau_order as tableau_order
+from ._audit import audit_paper as audit_paper
+from ._runge_kutta import CoefficientRungeKutta as CoefficientRungeKutta
+from ._runge_kutta import runge_kutta_coefficients as runge_kutta_coefficients
 from ._sweep import reference_solution as reference_solution
 from ._sweep import sweep as sweep
 from ._sweep import sweep_cases as sweep_cases
