@@ -153,3 +153,22 @@ def test_bad_input():
         gauss_legendre(BODY, 1)(jnp.ones((2, 3)), 0.1)
     with pytest.raises(jaxsplit.InputError, match="stages"):
         gauss_legendre(BODY, 0)
+
+
+def test_coefficient_rk_matches_tableau_rk_and_vmaps_over_tableaus():
+    from jaxsplit._runge_kutta import padded_coefficients, tableaus
+
+    names = ["rk4", "trapezoid", "gauss-legendre-3", "radau-iia-2"]  # explicit, explicit first row, implicit
+    coefs = [padded_coefficients(tableaus[n], 4) for n in names]
+    a_all = jnp.asarray(np.stack([c[0] for c in coefs]))
+    b_all = jnp.asarray(np.stack([c[1] for c in coefs]))
+    family = jax.jit(jax.vmap(lambda a, b: jaxsplit.runge_kutta_coefficients(BODY, a, b)(M0, 0.2)))(a_all, b_all)
+    for name, got in zip(names, family):
+        want = jax.jit(runge_kutta(BODY, name))(M0, 0.2)
+        assert float(jnp.max(jnp.abs(got - want))) <= 1e-15, name
+    # derivative with respect to a coefficient, against central differences
+    a, b = (jnp.asarray(c) for c in padded_coefficients(tableaus["gauss-legendre-2"], 2))
+    loss = jax.jit(lambda b0: jnp.sum(jaxsplit.runge_kutta_coefficients(BODY, a, b.at[0].set(b0))(M0, 0.3) ** 2))
+    g = float(jax.grad(loss)(b[0]))
+    fd = (float(loss(b[0] + 1e-6)) - float(loss(b[0] - 1e-6))) / 2e-6
+    assert abs(g - fd) <= FD_TOL
