@@ -34,16 +34,34 @@ import numpy as np
 from ._body import PAPER_BODY, PAPER_M0, STANDARD_CASE, RigidBody
 from ._errors import InputError
 from ._exact import symmetric_solution
-from ._hamilton_poisson import (canonical_system, constant_poisson_system, example_3_1, harmonic_oscillator,
-                                rigid_body_system)
+from ._hamilton_poisson import (
+    canonical_system,
+    constant_poisson_system,
+    example_3_1,
+    harmonic_oscillator,
+    rigid_body_system,
+)
 from ._integrate import integrate
 from ._invariants import monitor_invariants
 from ._order import fit_order, global_errors, ladder
-from ._poisson_check import (growth_exponent, kks_form, orbit_symplectic_defect, poisson_defect,
-                             random_unit_states, scanned, symplectic_defect)
+from ._poisson_check import (
+    growth_exponent,
+    kks_form,
+    orbit_symplectic_defect,
+    poisson_defect,
+    random_unit_states,
+    scanned,
+    symplectic_defect,
+)
 from ._rotations import hat, rotation_matrix
-from ._runge_kutta import (ButcherTableau, Ruth, padded_coefficients, runge_kutta, runge_kutta_coefficients,
-                           tableaus)
+from ._runge_kutta import (
+    ButcherTableau,
+    Ruth,
+    padded_coefficients,
+    runge_kutta,
+    runge_kutta_coefficients,
+    tableaus,
+)
 from ._schemes import triple_jump
 from ._splitting import splitting
 from ._tableau_checks import condition_2_7_defect
@@ -129,7 +147,7 @@ def claim_ex21_i(ctx):
                  "H(x_{n+1}) = (1+h²)H(x_n) + h²(h²/2−1)x²_n + h³x¹_n x²_n")
     step = Ruth()
     xs, hs = _samples(2, 11), _log_steps(12)
-    energy = lambda x: 0.5 * (x[0] ** 2 + x[1] ** 2)  # noqa: E731
+    energy = lambda x: 0.5 * (x[0] ** 2 + x[1] ** 2)
 
     def terms(x, h):
         new = energy(step(x, h))
@@ -283,7 +301,7 @@ def claim_ex31_i(ctx):
     on_paper_h = np.array([(2 * b - a) * big_a != 0 and abs(h - 1 / ((2 * b - a) * big_a)) < 1e-15
                            for big_a, big_b, a, b, h in cases])
     xs = _samples(2, 31, 32)
-    bad = lambda x, h: jnp.array([x[0], x[1] + h * x[1] ** 2])  # noqa: E731
+    bad = lambda x, h: jnp.array([x[0], x[1] + h * x[1] ** 2])
     control = _max_defect(lambda x, h: poisson_defect(bad, _ex31_pi, x, h), xs, jnp.full(32, 0.3))
     ev = {"cases": len(cases), "cases_with_paper_h": int(on_paper_h.sum()),
           "a_values": sorted({c[2] for c in cases}), "b_values": sorted({c[3] for c in cases}),
@@ -430,7 +448,7 @@ def claim_thm41(ctx):
     few = xs[:64]
 
     def per_h(h):
-        worst = lambda step: jnp.max(jax.vmap(lambda x: poisson_defect(step, hat, x, h))(few))  # noqa: E731
+        worst = lambda step: jnp.max(jax.vmap(lambda x: poisson_defect(step, hat, x, h))(few))
         classical = jax.vmap(lambda a, b: worst(runge_kutta_coefficients(asym, a, b)))(a_all, b_all)
         return worst(printed), worst(lt), classical
 
@@ -474,7 +492,7 @@ def claim_prop42(ctx):
         ev[f"max_KKS_defect_radius_{k:g}"] = float(d[i * N_SAMPLES:(i + 1) * N_SAMPLES].max())
     # control: RK4 projected back onto the sphere keeps the orbit but not the form
     rk = runge_kutta(body, tableaus["rk4"])
-    proj = lambda m, h: rk(m, h) * jnp.linalg.norm(m) / jnp.linalg.norm(rk(m, h))  # noqa: E731
+    proj = lambda m, h: rk(m, h) * jnp.linalg.norm(m) / jnp.linalg.norm(rk(m, h))
     ev["control_projected_RK4_h0.5"] = _max_defect(lambda x, h: orbit_symplectic_defect(proj, x, h),
                                                   random_unit_states(jax.random.PRNGKey(63), 64), jnp.full(64, 0.5))
 
@@ -625,7 +643,7 @@ def _invariant_runs(ctx):
                "trapezoid": (runge_kutta(body, tableaus["trapezoid"]), None)}
     for name, (step, cost) in methods.items():
         h = cost / unit_budget if cost else 0.1
-        n = int(round(t_end / h))
+        n = round(t_end / h)
         traj = integrate(step, m0, h, n, save_every=max(1, n // 1000))
         inv = monitor_invariants(body, traj)
         exact = symmetric_solution(body, m0, traj.t)
@@ -687,7 +705,7 @@ def claim_rem42(ctx):
     table = {}
     for name, (step, cost) in methods.items():
         hs = np.array([cost / b for b in budgets])
-        ns = np.array([int(round(t_end / h)) for h in hs])
+        ns = np.array([round(t_end / h) for h in hs])
         ends, e_max, c_max = _budget_runs(step, body, m0, hs, ns)
         for b, h, n, end, e, c in zip(budgets, hs, ns, np.asarray(ends), np.asarray(e_max), np.asarray(c_max)):
             err = _f(jnp.max(jnp.abs(end - symmetric_solution(body, m0, n * h))))

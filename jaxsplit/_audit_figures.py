@@ -111,8 +111,10 @@ def _evidence_lines(ev, depth=0):
 def write_report(records, figure_files, timings, path):
     """report.md: a summary table, then every claim with its measured evidence and figure."""
     lines = ["# Audit of the seed paper (Hedrea, Lie–Trotter integrator for the symmetric free rigid body)", "",
-             "Every verdict below was computed from the measurements at run time by `jaxsplit paper` "
-             "(`jaxsplit._audit`); thresholds: structure defects <= 1e-12 count as round-off, orders within 0.3.",
+             ("Every verdict below was computed from the measurements at run time by `jaxsplit paper` "
+              "(`jaxsplit._audit`); thresholds: structure defects <= 1e-12 count as round-off, orders within 0.3. "
+              "The text under each heading is the analysis explaining the measurement; the verdict itself comes "
+              "only from the numbers listed."),
              "", "| id | verdict | claim |", "|---|---|---|"]
     for r in records:
         lines.append(f"| {r['id']} | **{r['verdict']}** | {r['statement']} |")

@@ -24,9 +24,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._body import RigidBody
 from ._errors import InputError
 from ._rotations import hat
-from ._body import RigidBody
 
 Partial = jax.tree_util.Partial
 

@@ -10,8 +10,16 @@ import pytest
 
 import jaxsplit
 from jaxsplit import PAPER_BODY, RigidBody, hat, poisson_defect
-from jaxsplit._audit import (CLAIM_IDS, CLAIMS, VERDICTS, _iff_verdict, _one_stage_step, _PROVIDES, formula_4_3,
-                             formula_4_3_sequential)
+from jaxsplit._audit import (
+    _PROVIDES,
+    CLAIM_IDS,
+    CLAIMS,
+    VERDICTS,
+    _iff_verdict,
+    _one_stage_step,
+    formula_4_3,
+    formula_4_3_sequential,
+)
 from jaxsplit._poisson_check import random_unit_states
 from jaxsplit.cli import main
 

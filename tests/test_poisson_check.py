@@ -12,8 +12,21 @@ import numpy as np
 import pytest
 
 import jaxsplit
-from jaxsplit import (STANDARD_CASE, RigidBody, explicit_euler, gauss_legendre, hat, orbit_symplectic_defect,
-                      poisson_defect, poisson_summary, rk4, ruth, scanned, symplectic_defect, symplectic_summary)
+from jaxsplit import (
+    STANDARD_CASE,
+    RigidBody,
+    explicit_euler,
+    gauss_legendre,
+    hat,
+    orbit_symplectic_defect,
+    poisson_defect,
+    poisson_summary,
+    rk4,
+    ruth,
+    scanned,
+    symplectic_defect,
+    symplectic_summary,
+)
 from jaxsplit._poisson_check import growth_exponent, random_unit_states
 
 POISSON_TOL = 1e-12
@@ -99,7 +112,7 @@ def test_poisson_defect_on_a_non_constant_structure():
     # every RK method is Poisson here (see the audit, ex3.1): must pass
     assert poisson_summary(explicit_euler(ex), ex.poisson_matrix, xs, 0.3).max <= POISSON_TOL
     # a map that is not: x2 -> x2 + h x2², det DΦ x2 != Φ_2 -> defect = h x2² exactly
-    bad = lambda x, h: jnp.array([x[0], x[1] + h * x[1] ** 2])  # noqa: E731
+    bad = lambda x, h: jnp.array([x[0], x[1] + h * x[1] ** 2])
     summary = poisson_summary(bad, ex.poisson_matrix, xs, 0.3)
     assert summary.max == pytest.approx(float(jnp.max(0.3 * xs[:, 1] ** 2)), rel=1e-13)
 
@@ -110,7 +123,7 @@ def test_orbit_symplectic_defect_pass_and_fail():
     assert float(jnp.max(d(2.0 * STATES, STEPS))) <= SYMPLECTIC_TOL
     # RK4 projected back to the sphere keeps |m| but not the area form
     rk = rk4(BODY)
-    projected = lambda m, h: rk(m, h) * jnp.linalg.norm(m) / jnp.linalg.norm(rk(m, h))  # noqa: E731
+    projected = lambda m, h: rk(m, h) * jnp.linalg.norm(m) / jnp.linalg.norm(rk(m, h))
     e = jax.jit(jax.vmap(lambda x, h: orbit_symplectic_defect(projected, x, h)))
     assert float(jnp.max(e(STATES, jnp.full(N_SAMPLES, 0.5)))) >= 1e-6
 

@@ -12,8 +12,20 @@ import numpy as np
 import pytest
 
 import jaxsplit
-from jaxsplit import (STANDARD_CASE, RigidBody, example_3_1, explicit_euler, gauss_legendre, integrate,
-                      monitor_invariants, rigid_body_system, rk4, ruth, runge_kutta, trapezoid)
+from jaxsplit import (
+    STANDARD_CASE,
+    RigidBody,
+    example_3_1,
+    explicit_euler,
+    gauss_legendre,
+    integrate,
+    monitor_invariants,
+    rigid_body_system,
+    rk4,
+    runge_kutta,
+    ruth,
+    trapezoid,
+)
 
 QUADRATIC_INVARIANT_TOL = 1e-13  # GL over 1e4 steps, absolute (H, C ~ 0.5)
 TRAPEZOID_FLOOR = 1e-6  # the trapezoidal rule's invariant errors are ~1e-4

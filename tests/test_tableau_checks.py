@@ -9,8 +9,16 @@ import pytest
 
 import jaxsplit
 from jaxsplit._runge_kutta import ButcherTableau, gauss_legendre_tableau, tableaus
-from jaxsplit._tableau_checks import (condition_2_7_defect, is_explicit, order_conditions, rooted_trees,
-                                      satisfies_condition_2_7, symplecticity_matrix, tableau_order, tree_density)
+from jaxsplit._tableau_checks import (
+    condition_2_7_defect,
+    is_explicit,
+    order_conditions,
+    rooted_trees,
+    satisfies_condition_2_7,
+    symplecticity_matrix,
+    tableau_order,
+    tree_density,
+)
 
 CONDITION_TOL = 1e-14  # (2.7) on coefficients given to 16 digits
 VIOLATION_FLOOR = 1e-3  # methods that violate (2.7) do so by O(1) amounts
@@ -68,10 +76,10 @@ def test_order_conditions_pass_and_fail():
     assert tableau_order(KUTTA_38) == 4
     assert all(abs(c.residual) <= ORDER_TOL for c in order_conditions(KUTTA_38))
     # perturbing one weight (keeping sum b = 1) must break order 2 and beyond
-    a, b = KUTTA_38
+    a = KUTTA_38[0]
     bad = (a, (1 / 8 + 0.01, 3 / 8 - 0.01, 3 / 8, 1 / 8))
     assert tableau_order(bad) == 1
-    assert [c.order for c in order_conditions(bad) if abs(c.residual) > ORDER_TOL][0] == 2
+    assert next(c.order for c in order_conditions(bad) if abs(c.residual) > ORDER_TOL) == 2
     assert len(order_conditions(KUTTA_38)) == 8
 
 
