@@ -184,3 +184,14 @@ def test_coefficient_rk_matches_tableau_rk_and_vmaps_over_tableaus():
     g = float(jax.grad(loss)(b[0]))
     fd = (float(loss(b[0] + 1e-6)) - float(loss(b[0] - 1e-6))) / 2e-6
     assert abs(g - fd) <= FD_TOL
+
+
+def test_new_step_size_does_not_recompile():
+    from jaxsplit._integrate import _run
+
+    step = gauss_legendre(BODY, 2)
+    integrate(step, M0, 0.1, 7)
+    before = _run._cache_size()
+    for h in (0.05, 0.2, -0.1):
+        integrate(step, M0, h, 7)
+    assert _run._cache_size() == before
