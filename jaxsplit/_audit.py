@@ -777,7 +777,7 @@ def claim_rem44(ctx):
             label = f"I=(2,{s:g},1) axis {axis + 1}"
             differs = kind != exact
             table[label] = {"exact_flow": exact, "LT_at_h=0.01": str(kind[0]),
-                            "LT_|λ|max_at_h=0.01": float(radius[0]),
+                            "LT_spectral_radius_minus_1_at_h=0.01": float(radius[0] - 1),
                             "smallest_h_where_LT_type_differs": (
                                 _f(h_grid[np.argmax(differs)]) if np.any(differs) else None),
                             "max_fixed_point_residual": _f(jnp.max(fixed_all[si]))}
@@ -908,7 +908,10 @@ def audit_paper(out_dir, claims=None, *, figures: bool = True, force: bool = Fal
         raise InputError(f"--out {out_dir!r} exists and is not a directory")
     if os.path.isdir(out_dir) and os.path.exists(os.path.join(out_dir, "claims.json")) and not force:
         raise InputError(f"{out_dir!r} already holds claims.json; use --force to overwrite")
-    os.makedirs(out_dir, exist_ok=True)
+    try:
+        os.makedirs(out_dir, exist_ok=True)
+    except OSError as err:
+        raise InputError(f"cannot create --out {out_dir!r}: {err.strerror}") from err
     ctx, records, timings, fig_keys = {}, [], {}, []
     for cid, fn in CLAIMS:
         provides = _PROVIDES.get(cid, (cid,))

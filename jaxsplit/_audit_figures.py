@@ -95,10 +95,11 @@ def _evidence_lines(ev, depth=0):
         if isinstance(v, dict) and v and all(isinstance(x, dict) for x in v.values()):
             cols = list(dict.fromkeys(c for row in v.values() for c in row))
             lines.append(f"{'  ' * depth}- **{k}**:\n")
-            lines.append("| | " + " | ".join(cols) + " |")
+            lines.append("| | " + " | ".join(c.replace("|", "\\|") for c in cols) + " |")
             lines.append("|---" * (len(cols) + 1) + "|")
             for name, row in v.items():
-                lines.append(f"| {name} | " + " | ".join(_fmt(row.get(c, "")) for c in cols) + " |")
+                cells = (_fmt(row.get(c, "")).replace("|", "\\|") for c in cols)
+                lines.append(f"| {name} | " + " | ".join(cells) + " |")
             lines.append("")
         elif isinstance(v, dict):
             lines.append(f"{'  ' * depth}- **{k}**:")
