@@ -61,12 +61,18 @@ def make_figures(ctx, out_dir) -> dict:
         ax.legend(fontsize=7)
         save(fig, "orders")
     if "rem4.4" in ctx:
-        fig, ax = plt.subplots(figsize=(7, 4))
+        fig, axes = plt.subplots(1, 3, figsize=(12, 3.8), sharey=True)
         for label, (hs, radius) in ctx["rem4.4"].items():
-            ax.semilogx(hs, radius, lw=0.9, label=label)
-        ax.set_xlabel("h")
-        ax.set_ylabel("max |λ| of DΦ on the tangent plane")
-        ax.legend(fontsize=6, ncol=2)
+            axis = int(label.rsplit(" ", 1)[1]) - 1
+            axes[axis].plot(hs, np.maximum(radius - 1, 0), lw=0.9, label=label.split(" axis")[0])
+        for axis, ax in enumerate(axes):
+            ax.set_xscale("log")
+            ax.set_yscale("symlog", linthresh=1e-8)
+            ax.set_ylim(0, None)
+            ax.set_xlabel("h")
+            ax.set_title(f"equilibrium m = e{axis + 1}", fontsize=9)
+        axes[0].set_ylabel("max |λ| − 1 (0: on the unit circle)")
+        axes[0].legend(fontsize=7)
         save(fig, "rem4.4")
     if "rem4.5" in ctx:
         pts, axis = ctx["rem4.5"]["orbit"], ctx["rem4.5"]["axis"]
