@@ -33,6 +33,7 @@ EULER_IDENTITY_TOL = 4e-16  # |m|² ~ 1: a few ulps
 NEWTON_TOL = 1e-15  # stage residual after the solve, states of size ~1
 FD_TOL = 1e-7  # central differences with step 1e-5: truncation ~1e-10, round-off ~1e-11
 ORDER_TOL = 0.3
+NEWTON_UNCONVERGED = 1e-8  # residual after one Newton iteration at h = 0.5
 FIELD_TOL = 1e-15
 
 BODY = RigidBody(jnp.array(STANDARD_CASE.inertia))
@@ -80,7 +81,10 @@ def test_newton_converges_to_round_off(name):
     assert float(jnp.max(info.residual)) <= NEWTON_TOL
     assert int(jnp.max(info.iterations)) < step.max_iter
     # the stages solve the equations they claim to
-    k = step.stage_derivatives(M0, 0.5)
+    # must fail: a single Newton iteration leaves a residual far above round-off
+    one = jax.jit(runge_kutta(BODY, name, max_iter=1).newton_info)(M0, 0.5)
+    assert float(one.residual) >= NEWTON_UNCONVERGED
+    k = jax.jit(step.stage_derivatives)(M0, 0.5)
     a = jnp.asarray(step.tableau.a)
     assert float(jnp.max(jnp.abs(k - jax.vmap(BODY.vector_field)(M0 + 0.5 * a @ k)))) <= NEWTON_TOL
 
@@ -120,6 +124,16 @@ def test_measured_order(name, order, start):
     fit = jaxsplit.estimate_order(runge_kutta(BODY, name), M0, STANDARD_CASE.t_end,
                                   jaxsplit.ladder(start, 8.0, 6), REFERENCE)
     assert abs(fit.order - order) <= ORDER_TOL
+
+
+def test_estimate_order_fails_against_a_wrong_reference():
+    wrong = REFERENCE + 1e-7  # the errors plateau at 1e-7: no longer order 4
+    try:
+        fit = jaxsplit.estimate_order(runge_kutta(BODY, "rk4"), M0, STANDARD_CASE.t_end,
+                                      jaxsplit.ladder(60, 8.0, 6), wrong)
+    except jaxsplit.InputError:  # too few points left in the fit window: also a failure to confirm order 4
+        return
+    assert abs(fit.order - 4) > 1.0
 
 
 def test_measured_order_against_a_tight_reference_integration():
