@@ -734,9 +734,9 @@ def claim_rem42(ctx):
     verdict = "confirmed" if all(within) else ("refuted" if not any(within) else "corrected")
     notes = ("Accuracy: at equal cost RK4's global error is orders of magnitude below Lie–Trotter's (ratio grows as "
              "the budget grows: order 4 vs 1). Qualitatively the splitting keeps the Casimir to round-off and the "
-             "energy bounded with no drift, while RK4 drifts in both. Measured wall-clock per step (second cost model) "
-             "favours RK4 further: its four field evaluations cost less than three sin/cos rotations. 'Easier to "
-             "implement' is not measurable.")
+             "energy bounded with no drift, while RK4 drifts in both. 'Easier to implement' is not measurable. "
+             f"Second cost model, wall-clock per step on this machine: Lie–Trotter {wall['lie-trotter']:.3g} µs, "
+             f"Strang {wall['strang']:.3g} µs, RK4 {wall['rk4']:.3g} µs.")
     return _record("rem4.2", statement, verdict, ev, notes), None
 
 
