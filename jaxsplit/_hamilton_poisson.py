@@ -127,7 +127,7 @@ def _constant_pi(matrix, x):
 def constant_poisson_system(matrix, hamiltonian: Callable, name: str = "constant-poisson") -> HamiltonPoisson:
     """(Rⁿ, Π, H) with a constant skew matrix Π (any constant skew matrix is Poisson)."""
     mat = np.asarray(matrix, dtype=float)
-    if mat.ndim != 2 or mat.shape[0] != mat.shape[1] or not np.allclose(mat, -mat.T, atol=0):
+    if mat.ndim != 2 or mat.shape[0] != mat.shape[1] or not np.allclose(mat, -mat.T, rtol=0, atol=1e-14):
         raise InputError(f"a constant Poisson matrix must be square and skew, got {mat.tolist()}")
     return HamiltonPoisson(Partial(_constant_pi, jnp.asarray(mat)), hamiltonian, (), name)
 

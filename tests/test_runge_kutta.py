@@ -215,3 +215,18 @@ def test_new_step_size_does_not_recompile():
     for h in (0.05, 0.2, -0.1):
         integrate(step, M0, h, 7)
     assert _run._cache_size() == before
+
+
+def test_system_parameters_are_traced_leaves():
+    # d/dI of a GL2 integration: the HamiltonPoisson instance (inertia in a Partial) and the
+    # RigidBody give the same gradient, so parameters trace through jax.grad
+    def loss(inertia, make):
+        return jnp.sum(gauss_legendre(make(inertia), 2)(M0, 0.3) ** 3)
+
+    inertia = jnp.asarray(STANDARD_CASE.inertia)
+    g_system = jax.jit(jax.grad(loss), static_argnums=1)(inertia, rigid_body_system)
+    g_body = jax.jit(jax.grad(loss), static_argnums=1)(inertia, RigidBody)
+    assert float(jnp.max(jnp.abs(g_system - g_body))) <= 1e-13
+    assert float(jnp.max(jnp.abs(g_body))) > 1e-3
+    with pytest.raises(jaxsplit.InputError, match="skew"):
+        jaxsplit.constant_poisson_system([[0.0, 1.0], [1.0, 0.0]], lambda x: x[0])
