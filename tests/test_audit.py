@@ -76,7 +76,7 @@ def test_formula_4_3_as_printed_is_not_poisson_but_the_composition_is():
     assert float(jnp.min(defect(printed, STATES[:8], STEPS[-8:]))) >= PRINTED_FLOOR  # must fail
     assert float(jnp.max(defect(sequential, STATES, STEPS))) <= POISSON_TOL  # must pass
     adj = jaxsplit.splitting(BODY, "lie-trotter-adjoint")
-    gap = jax.vmap(lambda x, h: jnp.max(jnp.abs(sequential(x, h) - adj(x, h))))(STATES, STEPS)
+    gap = jax.jit(jax.vmap(lambda x, h: jnp.max(jnp.abs(sequential(x, h) - adj(x, h)))))(STATES, STEPS)
     assert float(jnp.max(gap)) <= EQUAL_TOL
 
 
