@@ -638,11 +638,9 @@ def _invariant_runs(ctx):
     t_end, unit_budget = 1000.0, 40  # units of cost per unit time
     runs = {}
     methods = {"lie-trotter": (splitting(body, "lie-trotter"), 3), "strang": (splitting(body, "strang"), 4),
-               "rk4": (runge_kutta(body, tableaus["rk4"]), 4),
-               "gauss-legendre-2": (runge_kutta(body, tableaus["gauss-legendre-2"]), None),
-               "trapezoid": (runge_kutta(body, tableaus["trapezoid"]), None)}
+               "rk4": (runge_kutta(body, tableaus["rk4"]), 4)}
     for name, (step, cost) in methods.items():
-        h = cost / unit_budget if cost else 0.1
+        h = cost / unit_budget
         n = round(t_end / h)
         traj = integrate(step, m0, h, n, save_every=max(1, n // 1000))
         inv = monitor_invariants(body, traj)
@@ -714,13 +712,13 @@ def claim_rem42(ctx):
                 "max_rel_casimir_error": float(c)}
     wall = {}
     for name, (step, _) in methods.items():  # a second, machine-dependent cost model: seconds per step
-        integrate(step, m0, 0.01, 200_000).block_until_ready()
+        integrate(step, m0, 0.01, 100_000).block_until_ready()
         best = math.inf
-        for h in (0.02, 0.03, 0.04):
+        for h in (0.02, 0.03):
             start = time.perf_counter()
-            integrate(step, m0, h, 200_000).block_until_ready()
+            integrate(step, m0, h, 100_000).block_until_ready()
             best = min(best, time.perf_counter() - start)
-        wall[name] = best / 200_000 * 1e6
+        wall[name] = best / 100_000 * 1e6
     ratios = [table["lie-trotter"][f"budget_{b}"]["global_error_T100"] / table["rk4"][f"budget_{b}"]["global_error_T100"]
               for b in budgets]
     runs = _invariant_runs(ctx)
