@@ -104,10 +104,9 @@ def test_checkpointed_gradient_memory_grows_sublinearly():
         return jax.jit(jax.grad(loss)).lower(x).compile().memory_analysis().temp_size_in_bytes
 
     small, large = 4_096, 65_536  # 16x the steps (perfect squares: whole blocks)
-    plain = temp_bytes(large, False) / temp_bytes(small, False)
     ckpt = temp_bytes(large, True) / temp_bytes(small, True)
-    assert plain > 12  # the plain scan stores every step: linear
-    assert ckpt < 6  # blocks of sqrt(n): ~sqrt(16) = 4
+    assert ckpt < 6  # blocks of sqrt(n): ~sqrt(16) = 4, far from the 16 of a linear law
+    assert temp_bytes(large, False) > 50 * temp_bytes(large, True)  # the plain scan stores every step
 
 
 def test_cli_fit_json(tmp_path, capsys, observations):
