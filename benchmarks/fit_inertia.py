@@ -16,9 +16,9 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-import jaxsplit  # noqa: E402
+import jaxsplit
 
 
 def main(argv=None):
@@ -36,8 +36,8 @@ def main(argv=None):
         inertia = ratios_scale * np.exp(rng.uniform(-1, 1))  # an unknown overall scale too
         obs = jaxsplit.simulate_observations(inertia, m0, t, 1e-3, seed=args.seed + 100 + k)
         energy = 0.5 * float(np.sum(m0**2 / inertia))
-        kw = (dict(energy=energy, energy_sigma=1e-3 * energy) if args.gauge == "energy"
-              else dict(inertia1=float(inertia[0])))
+        kw = ({"energy": energy, "energy_sigma": 1e-3 * energy} if args.gauge == "energy"
+              else {"inertia1": float(inertia[0])})
         start = time.perf_counter()
         res = jaxsplit.fit_inertia(t, obs, **kw)
         wall = time.perf_counter() - start

@@ -20,10 +20,10 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
+import jax.numpy as jnp
+import numpy as np
 
-import jaxsplit  # noqa: E402
+import jaxsplit
 
 
 def loss_fn(n_steps: int, checkpointed: bool, m0s):
@@ -75,7 +75,7 @@ def main(argv=None):
     print(f"{'n_steps':>9} {'checkpoint':>10} {'peak temp MiB':>14} {'total MiB':>10} {'compile s':>9}"
           + (" run s" if args.run else ""))
     for r in rows:
-        print(f"{r['n_steps']:>9} {str(r['checkpointed']):>10} {r['temp_bytes'] / 2**20:>14.3f} "
+        print(f"{r['n_steps']:>9} {r['checkpointed']!s:>10} {r['temp_bytes'] / 2**20:>14.3f} "
               f"{r['total_bytes'] / 2**20:>10.3f} {r['compile_s']:>9}" + (f" {r['run_s']}" if args.run else ""))
     by = {(r["n_steps"], r["checkpointed"]): r["temp_bytes"] for r in rows}
     ns = sorted(args.counts)

@@ -39,7 +39,7 @@ def order4_coefficients(z):
 
     ``z`` (k − 1,) gives s = 2k + 1 stages; works on numpy and JAX arrays (differentiable).
     """
-    xp = jnp if isinstance(z, jax.Array) or isinstance(z, jax.core.Tracer) else np
+    xp = jnp if isinstance(z, (jax.Array, jax.core.Tracer)) else np
     z = xp.asarray(z)
     v = xp.concatenate([xp.ones((1,), z.dtype), z])
     cube = 2 * xp.sum(v**3)

@@ -122,9 +122,9 @@ def test_cli_fit_json(tmp_path, capsys, observations):
 
 
 @pytest.mark.parametrize("content, match", [
-    (dict(t=np.arange(5.0)), "missing"),
-    (dict(t=np.arange(5.0), m=np.zeros((4, 3))), "shape"),
-    (dict(t=np.arange(5.0), m=np.array(["a"] * 15).reshape(5, 3)), "numeric"),
+    ({"t": np.arange(5.0)}, "missing"),
+    ({"t": np.arange(5.0), "m": np.zeros((4, 3))}, "shape"),
+    ({"t": np.arange(5.0), "m": np.array(["a"] * 15).reshape(5, 3)}, "numeric"),
 ])
 def test_cli_malformed_data_is_one_line(tmp_path, capsys, content, match):
     path = tmp_path / "bad.npz"

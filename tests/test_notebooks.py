@@ -10,13 +10,13 @@ import pytest
 
 NOTEBOOKS = sorted((pathlib.Path(__file__).parent.parent / "notebooks").glob("*.ipynb"))
 CELL_TIMEOUT = 600  # seconds per cell (nbclient)
-RUNNER = textwrap.dedent("""
+RUNNER = textwrap.dedent(f"""
     import sys, nbformat
     from nbclient import NotebookClient
     nb = nbformat.read(sys.argv[1], as_version=4)
-    NotebookClient(nb, timeout=%d, kernel_name="python3",
-                   resources={"metadata": {"path": sys.argv[2]}}).execute()
-""" % CELL_TIMEOUT)
+    NotebookClient(nb, timeout={CELL_TIMEOUT}, kernel_name="python3",
+                   resources={{"metadata": {{"path": sys.argv[2]}}}}).execute()
+""")
 
 
 @pytest.fixture(scope="module")
@@ -35,7 +35,7 @@ def test_there_are_three_stories():
 
 @pytest.mark.parametrize("name", [nb.name for nb in NOTEBOOKS])
 def test_notebook_executes(runs, name):
-    code, (out, err) = runs[name]
+    code, (_out, err) = runs[name]
     assert code == 0, err[-4000:]
 
 

@@ -107,10 +107,10 @@ def test_device_memory_is_bounded_per_chunk():
 
 
 @pytest.mark.parametrize("kwargs, match", [
-    (dict(t_end=-1.0), "t_end"),
-    (dict(t_end=1.0, chunk_size=0), "chunk_size"),
-    (dict(t_end=1.0, split="diagonal"), "split"),
-    (dict(t_end=1.0, shift_axis=4, split="casimir"), "shift_axis"),
+    ({"t_end": -1.0}, "t_end"),
+    ({"t_end": 1.0, "chunk_size": 0}, "chunk_size"),
+    ({"t_end": 1.0, "split": "diagonal"}, "split"),
+    ({"t_end": 1.0, "shift_axis": 4, "split": "casimir"}, "shift_axis"),
 ])
 def test_bad_arguments(kwargs, match):
     cases = jaxsplit.sweep_cases(states=2)
