@@ -351,7 +351,7 @@ def sweep(scheme, cases: dict, *, t_end: float, split: str = "axes", shift_axis=
         idx = order[np.isin(order, idx)]
         shift = axis if split == "casimir" else "auto"
         fn = _compiled(("case", scheme, split, shift), lambda: _case_kernel(scheme, split, shift), devices)
-        res = _chunked(fn, [m0[idx], inertia[idx], h_exact[idx], n_steps[idx]], chunk_size, len(devices))
+        res = _chunked(fn, [m0[idx], inertia[idx], h_exact[idx], n_steps[idx].astype(np.int32)], chunk_size, len(devices))
         return [r[np.argsort(idx)] for r in res]  # back to ascending case order
 
     m_final, de, dc, defect = _grouped(axes, run)
