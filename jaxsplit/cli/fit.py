@@ -17,7 +17,7 @@ from .._fit import fit_inertia
 
 def add_parser(sub):
     p = sub.add_parser("fit", help="fit inertia ratios to an observed trajectory",
-                       description=__doc__.splitlines()[0])
+                       description=__doc__.split(": ", 1)[1].replace("``", ""))
     p.add_argument("--data", required=True, help="obs.npz holding t (n,) and m (n, 3)")
     p.add_argument("--energy", type=float, default=None, help="known kinetic energy (fixes the gauge)")
     p.add_argument("--energy-sigma", type=float, default=0.0, help="standard deviation of --energy")
