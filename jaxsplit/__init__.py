@@ -31,6 +31,7 @@ from ._order import fit_order as fit_order
 from ._order import global_errors as global_errors
 from ._order import ladder as ladder
 from ._rotations import hat as hat
+from ._rotations import rotate as rotate
 from ._rotations import rotation_matrix as rotation_matrix
 from ._schemes import Scheme as Scheme
 from ._schemes import schemes as schemes

@@ -27,6 +27,18 @@ def rotation_matrix(axis: int, angle):
     return jnp.stack([jnp.stack(row, axis=-1) for row in rows], axis=-2)
 
 
+def rotate(m, axis: int, angle):
+    """``rotation_matrix(axis, angle) @ m`` computed on the two components it changes
+    (agrees with the matrix to round-off; as fast as hand-fused scalar code)."""
+    c, s = jnp.cos(angle), jnp.sin(angle)
+    i, j = (axis + 1) % 3, (axis + 2) % 3
+    out = [None, None, None]
+    out[axis] = m[..., axis]
+    out[i] = c * m[..., i] + s * m[..., j]
+    out[j] = -s * m[..., i] + c * m[..., j]
+    return jnp.stack(out, axis=-1)
+
+
 def hat(v):
     """hat(v) w = v x w; for the rigid body this is the Poisson matrix Π(m)."""
     z = jnp.zeros_like(v[..., 0])

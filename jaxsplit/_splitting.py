@@ -20,7 +20,7 @@ import numpy as np
 from ._body import RigidBody
 from ._compose import Composition, compose
 from ._errors import InputError
-from ._rotations import rotation_matrix
+from ._rotations import rotate
 
 SPLITS = ("axes", "casimir")
 
@@ -41,7 +41,7 @@ class AxisRotation:
 
     def __call__(self, m, t, body: RigidBody):
         angle = self.rate(body, m.dtype) * m[self.axis] * t
-        return rotation_matrix(self.axis, angle) @ m
+        return rotate(m, self.axis, angle)
 
 
 def auto_shift_axis(body: RigidBody) -> int:

@@ -64,3 +64,13 @@ def test_symmetric_solution_matches_an_independent_integration():
     np.testing.assert_allclose(jaxsplit.symmetric_solution(body, m0, ts), ref, atol=ODE_TOL)
     with pytest.raises(InputError, match="not symmetric"):
         jaxsplit.symmetric_solution(RigidBody([1.0, 2.0, 3.0]), m0, 1.0)
+
+
+@pytest.mark.parametrize("axis", [0, 1, 2])
+def test_rotate_applies_the_papers_matrix(axis):
+    """rotate(m, k, θ) = M m, N m or P m, and the matrices are proper rotations."""
+    m = jnp.array([0.3, -0.5, 0.8])
+    matrix = jaxsplit.rotation_matrix(axis, 0.7)
+    np.testing.assert_allclose(jaxsplit.rotate(m, axis, 0.7), matrix @ m, atol=ROUNDOFF)
+    np.testing.assert_allclose(matrix @ matrix.T, np.eye(3), atol=ROUNDOFF)
+    assert abs(np.linalg.det(matrix) - 1) < ROUNDOFF
