@@ -32,6 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._body import PAPER_BODY, PAPER_M0, STANDARD_CASE, RigidBody
+from ._compose import roll
 from ._errors import InputError
 from ._exact import symmetric_solution
 from ._hamilton_poisson import (
@@ -50,7 +51,6 @@ from ._poisson_check import (
     orbit_symplectic_defect,
     poisson_defect,
     random_unit_states,
-    scanned,
     symplectic_defect,
 )
 from ._rotations import hat, rotation_matrix
@@ -529,7 +529,7 @@ def _orders(ctx):
     exact = symmetric_solution(body, m0, t_end)
     out = {}
     for name, claimed, start in _ORDER_RUNS:
-        step = scanned(splitting(body, name))
+        step = roll(splitting(body, name))
         hs, errs = global_errors(step, m0, t_end, ladder(start, 8.0, 6), exact)
         fit = fit_order(hs, errs)
         out[name] = {"claimed": claimed, "measured": fit.order, "step_sizes": hs, "errors": errs,
@@ -537,7 +537,7 @@ def _orders(ctx):
     asym = RigidBody(jnp.asarray(STANDARD_CASE.inertia))
     ref = jnp.asarray(STANDARD_CASE.reference)
     for name, claimed, start in _ORDER_RUNS:
-        hs, errs = global_errors(scanned(splitting(asym, name)), jnp.asarray(STANDARD_CASE.m0), STANDARD_CASE.t_end,
+        hs, errs = global_errors(roll(splitting(asym, name)), jnp.asarray(STANDARD_CASE.m0), STANDARD_CASE.t_end,
                                  ladder(start, 8.0, 6), ref)
         out[name]["measured_asymmetric"] = fit_order(hs, errs).order
     ctx["orders"] = out

@@ -12,11 +12,13 @@ time-t flow of one piece; the state may be any PyTree.
 """
 
 import dataclasses
+import functools
 from collections.abc import Callable, Sequence
 from typing import Any
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ._errors import InputError
 from ._schemes import Scheme, schemes
@@ -120,6 +122,54 @@ class Composition:
     def tree_unflatten(cls, aux, children):
         flows, w, scheme, fsal = aux
         return cls(flows, w, children[0], scheme, fsal)
+
+
+@jax.tree_util.register_pytree_node_class
+class RolledComposition:
+    """The same map as a ``Composition``, its word run by ``lax.scan`` + ``lax.switch`` with
+    the pieces and weights as traced arrays.
+
+    Compile time no longer grows with the word, and every scheme over the same flows (padded
+    to one length with identity sub-flows) shares ONE compilation: the right form for checks
+    over a whole registry, sweeps and optimisation loops. The unrolled ``Composition`` runs
+    faster (no switch, merging across steps); prefer it for long integrations.
+    """
+
+    def __init__(self, flows, pieces, weights, params):
+        self.flows, self.pieces, self.weights, self.params = tuple(flows), pieces, weights, params
+
+    def __call__(self, state, h):
+        h = _like_state(h, state)
+        branches = [functools.partial(_call_flow, f, self.params) for f in self.flows]
+
+        def sub_flow(x, piece_weight):
+            piece, weight = piece_weight
+            return jax.lax.switch(piece, branches, x, weight.astype(h.dtype) * h), None
+
+        return jax.lax.scan(sub_flow, state, (self.pieces, self.weights))[0]
+
+    def tree_flatten(self):
+        return (self.pieces, self.weights, self.params), self.flows
+
+    @classmethod
+    def tree_unflatten(cls, flows, children):
+        return cls(flows, *children)
+
+
+def _call_flow(flow, params, state, t):
+    return flow(state, t, params)
+
+
+def roll(composition: Composition, length: int | None = None) -> RolledComposition:
+    """``composition`` as a ``RolledComposition``, padded to ``length`` sub-flows."""
+    w = tuple(composition.word)
+    length = len(w) if length is None else int(length)
+    if length < len(w):
+        raise InputError(f"length must be at least the word length {len(w)}, got {length}")
+    padded = w + ((0, 0.0),) * (length - len(w))
+    pieces = jnp.asarray(np.array([p for p, _ in padded], dtype=np.int32))
+    weights = jnp.asarray(np.array([c for _, c in padded]))
+    return RolledComposition(composition.flows, pieces, weights, composition.params)
 
 
 def _like_state(h, state):

@@ -50,6 +50,7 @@ import numpy as np
 import optax
 
 from ._body import RigidBody
+from ._compose import roll
 from ._errors import InputError
 from ._integrate import _advance
 from ._schemes import schemes
@@ -115,26 +116,9 @@ def integral_matching(t, m) -> np.ndarray:
     return w
 
 
-def rolled_step(composition):
-    """The same map as ``composition(m, h)``, its sub-flows run by a ``lax.scan`` over the
-    word with ``lax.switch`` on the piece: compile time no longer grows with the word
-    (a 6th-order word under ``grad`` compiles ~4x faster), at ~3x the run time."""
-    pieces = np.array([p for p, _ in composition.word], dtype=np.int32)
-    weights = np.array([w for _, w in composition.word])
-    branches = [lambda y, t, f=f: f(y, t, composition.params) for f in composition.flows]
-
-    def step(m, h):
-        def sub(y, pw):
-            return jax.lax.switch(pw[0], branches, y, pw[1] * h), None
-
-        return jax.lax.scan(sub, m, (jnp.asarray(pieces), jnp.asarray(weights, m.dtype)))[0]
-
-    return step
-
-
 def _predict(scheme, shift, n_sub: int, log_inertia, m0, dts):
     """m at every observation time: one checkpointed block of ``n_sub`` steps per interval."""
-    step = rolled_step(splitting(RigidBody(jnp.exp(log_inertia)), scheme, "casimir", shift_axis=shift))
+    step = roll(splitting(RigidBody(jnp.exp(log_inertia)), scheme, "casimir", shift_axis=shift))
 
     @jax.checkpoint
     def interval(m, dt):

@@ -62,7 +62,7 @@ def global_errors(step, x0, t_end: float, counts, reference):
 
 def ladder(start: int, factor: float = 16.0, points: int = 12):
     """Step counts growing geometrically from ``start`` by ``factor`` overall."""
-    return sorted({int(round(start * factor ** (k / (points - 1)))) for k in range(points)})
+    return sorted({round(start * factor ** (k / (points - 1))) for k in range(points)})
 
 
 def estimate_order(step, x0, t_end: float, counts, reference=None, *, reference_step=None,

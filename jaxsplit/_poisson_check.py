@@ -153,50 +153,6 @@ def growth_exponent(hs, defects, floor: float = 1e-13) -> float:
     return float(np.polyfit(np.log(h[use]), np.log(d[use]), 1)[0])
 
 
-@jax.tree_util.register_pytree_node_class
-class ScannedWord:
-    """A composition's word run by ``lax.scan`` + ``lax.switch``, the word being array data.
-
-    ``Composition.__call__`` unrolls its word, so every scheme is a new (and, for long
-    schemes under ``jacfwd``, slow) compilation. Here the pieces and weights are traced
-    arrays: every scheme over the same flows, padded to the same length with identity
-    sub-flows (weight 0), shares ONE compilation, which is what sweeping a check over a
-    whole registry needs. Same maths as the composition it came from, up to round-off.
-    """
-
-    def __init__(self, flows, pieces, weights, params):
-        self.flows, self.pieces, self.weights, self.params = tuple(flows), pieces, weights, params
-
-    def __call__(self, x, h):
-        h = jnp.asarray(h, dtype=x.dtype)
-        branches = [lambda y, t, f=f: f(y, t, self.params) for f in self.flows]
-
-        def body(y, pw):
-            piece, weight = pw
-            return jax.lax.switch(piece, branches, y, weight.astype(y.dtype) * h), None
-
-        return jax.lax.scan(body, x, (self.pieces, self.weights))[0]
-
-    def tree_flatten(self):
-        return (self.pieces, self.weights, self.params), self.flows
-
-    @classmethod
-    def tree_unflatten(cls, flows, children):
-        return cls(flows, *children)
-
-
-def scanned(composition, length: int | None = None) -> ScannedWord:
-    """``composition`` (flows, word, params) as a ``ScannedWord`` padded to ``length`` sub-flows."""
-    word = tuple(composition.word)
-    length = len(word) if length is None else int(length)
-    if length < len(word):
-        raise InputError(f"length {length} is shorter than the word ({len(word)} sub-flows)")
-    pad = ((0, 0.0),) * (length - len(word))
-    pieces = np.asarray([p for p, _ in word + pad], dtype=np.int32)
-    weights = np.asarray([w for _, w in word + pad], dtype=np.float64)
-    return ScannedWord(composition.flows, jnp.asarray(pieces), jnp.asarray(weights), composition.params)
-
-
 def random_unit_states(key, n_samples: int, dim: int = 3, dtype=None):
     """States uniform on the unit sphere of Rⁿ (a sample for the checks)."""
     x = jax.random.normal(key, (n_samples, dim), dtype=dtype or jnp.result_type(float))

@@ -22,8 +22,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._body import RigidBody
+from ._compose import roll
 from ._errors import InputError
-from ._fit import rolled_step
 from ._schemes import schemes
 from ._splitting import SPLITS, splitting
 from ._sweep import _grouped, _shift_axes
@@ -38,7 +38,7 @@ def _tangent_block(jac, axis: int):
 
 def _kernel(scheme, split, shift):
     def one(h, inertia):
-        step = rolled_step(splitting(RigidBody(inertia), scheme, split, shift_axis=shift))
+        step = roll(splitting(RigidBody(inertia), scheme, split, shift_axis=shift))
         eye = jnp.eye(3, dtype=inertia.dtype)
         out = []
         for axis in range(3):

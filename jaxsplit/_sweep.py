@@ -36,7 +36,7 @@ for the default chunk of 1024, whatever the step count (checked in
 inputs and outputs, 19 numbers (152 bytes in float64) per case; larger sweeps are split
 into chunk files by the CLI. One compilation serves every chunk (all chunks are padded to
 one shape) and every step size (h and the step count are traced); the composition word
-runs as a scan (``rolled_step``), so compile time does not grow with the scheme's length.
+runs as a scan (``roll``), so compile time does not grow with the scheme's length.
 
 With several JAX devices (default: all of ``jax.devices()``) each chunk is sharded along
 the case axis with ``jax.shard_map`` over a one-axis ``Mesh``; every case is computed by
@@ -52,8 +52,8 @@ from jax.sharding import Mesh
 from jax.sharding import PartitionSpec as P
 
 from ._body import RigidBody
+from ._compose import roll
 from ._errors import InputError
-from ._fit import rolled_step
 from ._rotations import hat
 from ._schemes import schemes
 from ._splitting import SPLITS, splitting
@@ -179,7 +179,7 @@ def _case_kernel(scheme, split, shift):
 
     def run(m0, inertia, h, n):
         body = RigidBody(inertia)
-        step = rolled_step(splitting(body, scheme, split, shift_axis=shift))
+        step = roll(splitting(body, scheme, split, shift_axis=shift))
         h0, c0 = body.hamiltonian(m0), body.casimir(m0)
         zero = jnp.zeros_like(h0)  # derived from the inputs (varying under shard_map)
 
@@ -204,7 +204,7 @@ def _reference_kernel(scheme, shift, n_ref: int):
     """
 
     def one(m0, inertia, t_end, n):
-        step = rolled_step(splitting(RigidBody(inertia), scheme, "casimir", shift_axis=shift))
+        step = roll(splitting(RigidBody(inertia), scheme, "casimir", shift_axis=shift))
         h = t_end / n.astype(m0.dtype)
         return jax.lax.while_loop(lambda c: c[0] < n, lambda c: (c[0] + 1, step(c[1], h)),
                                   (jnp.zeros_like(n), m0))[1]

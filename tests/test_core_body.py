@@ -50,7 +50,7 @@ def test_axis_rotation_is_the_exact_flow_of_its_piece(axis):
     """Each of M, N, P against a tight DOP853 integration of ṁ = m × ∇H_axis."""
     body = RigidBody([2.0, 1.0, 2.0 / 3.0])
     m0 = np.array([0.3, -0.5, 0.8])
-    field = lambda t, m: np.cross(m, np.eye(3)[axis] * m[axis] / body.inertia[axis])  # noqa: E731
+    field = lambda t, m: np.cross(m, np.eye(3)[axis] * m[axis] / body.inertia[axis])
     ref = solve_ivp(field, (0, 3.0), m0, method="DOP853", rtol=1e-13, atol=1e-13).y[:, -1]
     np.testing.assert_allclose(jaxsplit.AxisRotation(axis)(jnp.asarray(m0), 3.0, body), ref, atol=ODE_TOL)
 

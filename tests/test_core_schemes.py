@@ -47,18 +47,18 @@ def test_recursive_triple_jump_has_3_to_the_n_strang_stages(n):
 
 
 @pytest.mark.parametrize("kwargs, message", [
-    (dict(coefficients=(0.5, 0.4)), "sum to 1"),
-    (dict(coefficients=(0.7, 0.3)), "palindrome"),
-    (dict(order=3), "even order"),
-    (dict(order=4, coefficients=(0.25, 0.5, 0.25)), r"Σγ\^3"),
-    (dict(form="magic"), "form must be"),
-    (dict(name="Not Kebab"), "kebab"),
-    (dict(coefficients=(float("nan"),)), "finite"),
-    (dict(form="partitioned", coefficients=(0.5, 1.0)), "odd in number"),
-    (dict(form="lie-adjoint", order=1, coefficients=(1.0,)), "even number"),
+    ({"coefficients": (0.5, 0.4)}, "sum to 1"),
+    ({"coefficients": (0.7, 0.3)}, "palindrome"),
+    ({"order": 3}, "even order"),
+    ({"order": 4, "coefficients": (0.25, 0.5, 0.25)}, r"Σγ\^3"),
+    ({"form": "magic"}, "form must be"),
+    ({"name": "Not Kebab"}, "kebab"),
+    ({"coefficients": (float("nan"),)}, "finite"),
+    ({"form": "partitioned", "coefficients": (0.5, 1.0)}, "odd in number"),
+    ({"form": "lie-adjoint", "order": 1, "coefficients": (1.0,)}, "even number"),
 ])
 def test_invalid_schemes_are_refused(kwargs, message):
-    fields = dict(name="bad", order=2, form="symmetric", coefficients=(1.0,))
+    fields = {"name": "bad", "order": 2, "form": "symmetric", "coefficients": (1.0,)}
     fields.update(kwargs)
     with pytest.raises(InputError, match=message):
         Scheme(**fields)

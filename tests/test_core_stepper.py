@@ -83,7 +83,7 @@ def test_symmetric_schemes_are_time_reversible(name, split):
     step = jaxsplit.splitting(STANDARD, name, split)
     states = random_unit_states(16)
     for h in (1e-3, 0.1, 1.0):
-        back = jax.vmap(lambda m: step(step(m, h), -h))(states)
+        back = jax.vmap(lambda m, h=h: step(step(m, h), -h))(states)
         assert np.abs(back - states).max() <= REVERSIBILITY_TOL
 
 
@@ -168,7 +168,7 @@ def test_saving_keeps_the_start_every_kth_state_and_the_end():
     traj = jaxsplit.integrate(step, M0, 0.1, 10, save_every=4)
     np.testing.assert_allclose(traj.t, [0.0, 0.4, 0.8, 1.0], rtol=1e-15)
     for t, x in zip(traj.t, traj.x):
-        n = int(round(float(t) / 0.1))
+        n = round(float(t) / 0.1)
         assert np.abs(x - jaxsplit.integrate(step, M0, 0.1, n)).max() <= ROUNDOFF
     assert jaxsplit.integrate(step, M0, 0.1, 0) is not None
 
