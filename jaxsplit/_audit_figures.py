@@ -27,6 +27,9 @@ def make_figures(ctx, out_dir) -> dict:
 
     def save(fig, key):
         name = _FIGURES[key][0]
+        for ax in fig.axes:  # minor labels of short log axes overprint each other
+            if ax.get_xscale() == "log":
+                ax.xaxis.set_minor_formatter(plt.NullFormatter())
         fig.tight_layout()
         fig.savefig(os.path.join(out_dir, name), dpi=110)
         plt.close(fig)
