@@ -12,8 +12,6 @@ which for k = 1, 2, 3 gives exactly the matrices M, N, P of the paper.
 
 import jax.numpy as jnp
 
-AXES = (0, 1, 2)
-
 
 def rotation_matrix(axis: int, angle):
     """The 3x3 rotation of the paper (M, N or P for axis 0, 1, 2) by ``angle``."""
