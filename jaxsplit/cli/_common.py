@@ -493,3 +493,21 @@ def run_chunked(step, x0, h, n_steps: int, save_every: int, *, flows_per_step: i
             progress.close(done if not interrupted else None)
     return RunResult(np.concatenate(steps), np.concatenate(saved), done, nonfinite, interrupted,
                      time.perf_counter() - start)
+
+
+def resolve_scheme_and_shift(args, body):
+    """The scheme named by ``--scheme`` and the 1-based Casimir shift axis (``None`` for the
+    axes split), refusing a scheme that does not fit ``--split`` and a stray ``--shift-axis``."""
+    from .._schemes import schemes
+    from .._splitting import auto_shift_axis
+
+    scheme = schemes[args.scheme]
+    if not scheme.pieces_allowed(3 if args.split == "axes" else 2):
+        raise InputError(f"--scheme {scheme.name} is {scheme.form} (exactly two pieces) and does not fit "
+                         "--split axes (three pieces); use --split casimir")
+    if args.shift_axis is not None and args.split != "casimir":
+        raise InputError("--shift-axis applies only with --split casimir")
+    shift = "auto" if args.shift_axis in (None, "auto") else int(args.shift_axis)
+    if args.split == "casimir" and shift == "auto":
+        shift = auto_shift_axis(body) + 1
+    return scheme, shift

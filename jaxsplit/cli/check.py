@@ -108,19 +108,10 @@ def run(args):
     import jax.numpy as jnp
 
     from .._exact import symmetric_solution, symmetry_axis
-    from .._schemes import schemes
-    from .._splitting import auto_shift_axis, splitting
+    from .._splitting import splitting
 
     body = c.check_body(args.inertia, args.allow_nonphysical)
-    scheme = schemes[args.scheme]
-    if not scheme.pieces_allowed(3 if args.split == "axes" else 2):
-        raise InputError(f"--scheme {scheme.name} is {scheme.form} (exactly two pieces) and does not fit "
-                         "--split axes (three pieces); use --split casimir")
-    if args.shift_axis is not None and args.split != "casimir":
-        raise InputError("--shift-axis applies only with --split casimir")
-    shift = "auto" if args.shift_axis in (None, "auto") else int(args.shift_axis)
-    if args.split == "casimir" and shift == "auto":
-        shift = auto_shift_axis(body) + 1
+    scheme, shift = c.resolve_scheme_and_shift(args, body)
     m0 = jnp.asarray(args.m0, dtype=jnp.float64)
     if not np.any(np.asarray(args.m0)):
         raise InputError("--m0 must be non-zero (the order is measured on a moving state)")

@@ -168,7 +168,6 @@ def run(args):
     import jax.numpy as jnp
 
     from .._exact import symmetric_solution, symmetry_axis
-    from .._schemes import schemes
     from .._splitting import splitting
 
     # ---- validate everything before any work
@@ -177,17 +176,7 @@ def run(args):
     with np.errstate(over="ignore"):
         if not (np.isfinite(0.5 * np.sum(m0 * m0)) and np.isfinite(0.5 * np.sum(m0 * m0 / np.asarray(args.inertia)))):
             raise InputError(f"--m0 {c.fmt_vec(m0)} is too large: its energy or |m0|^2 overflows float64")
-    scheme = schemes[args.scheme]
-    if not scheme.pieces_allowed(3 if args.split == "axes" else 2):
-        raise InputError(f"--scheme {scheme.name} is {scheme.form} (exactly two pieces) and does not fit "
-                         "--split axes (three pieces); use --split casimir")
-    if args.shift_axis is not None and args.split != "casimir":
-        raise InputError("--shift-axis applies only with --split casimir")
-    shift = "auto" if args.shift_axis in (None, "auto") else int(args.shift_axis)
-    if args.split == "casimir" and shift == "auto":
-        from .._splitting import auto_shift_axis
-
-        shift = auto_shift_axis(body) + 1
+    scheme, shift = c.resolve_scheme_and_shift(args, body)
     n_steps = _steps(args)
     save_every = args.save_every
     n_saved = n_steps // save_every + 2
