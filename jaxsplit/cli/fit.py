@@ -14,10 +14,20 @@ import numpy as np
 from .._errors import InputError
 from .._fit import fit_inertia
 
+EXAMPLES = """examples:
+  jaxsplit fit --data obs.npz                    # assumes I1 = 1 and says so
+  jaxsplit fit --data obs.npz --energy 0.65 --energy-sigma 1e-3 --json
+  jaxsplit fit --data obs.npz --inertia1 2.0 --scheme strang --max-step 0.02
+obs.npz: t (n,) increasing times, m (n, 3) observed body angular momenta; optional
+scalars energy and inertia1. Exit status 2 for a malformed file (one line)."""
+
 
 def add_parser(sub):
+    import argparse
+
     p = sub.add_parser("fit", help="fit inertia ratios to an observed trajectory",
-                       description=__doc__.split(": ", 1)[1].replace("``", ""))
+                       description=__doc__.split(": ", 1)[1].replace("``", ""), epilog=EXAMPLES,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--data", required=True, help="obs.npz holding t (n,) and m (n, 3)")
     p.add_argument("--energy", type=float, default=None, help="known kinetic energy (fixes the gauge)")
     p.add_argument("--energy-sigma", type=float, default=0.0, help="standard deviation of --energy")
@@ -63,6 +73,9 @@ def load_observations(path: str):
         raise InputError(f"{path}: t must have shape (n,), got {t.shape}")
     if m.shape != (len(t), 3):
         raise InputError(f"{path}: m must have shape ({len(t)}, 3), got {m.shape}")
+    for name, arr in (("t", t), ("m", m)):
+        if not np.all(np.isfinite(arr)):
+            raise InputError(f"{path}: {name} must be finite, found {int(np.sum(~np.isfinite(arr)))} NaN/inf")
     return t, m, energy, inertia1
 
 

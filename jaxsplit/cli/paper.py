@@ -3,9 +3,18 @@
 import os
 import time
 
+EXAMPLES = """examples:
+  jaxsplit paper --out audit                     # all claims (~40 s on 2 cores)
+  jaxsplit paper --out audit --force             # replace an earlier audit in DIR
+  jaxsplit paper --out audit --claims thm4.1,rem4.4
+Verdicts (confirmed, refuted, corrected, not-checkable) are computed from the measurements."""
+
 
 def add_parser(sub):
+    import argparse
+
     p = sub.add_parser("paper", help="audit every checkable claim of the seed paper",
+                       epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter,
                        description="Re-derive every checkable claim of the seed paper numerically; write "
                                    "DIR/claims.json (one record per claim, verdict computed from measurements), "
                                    "DIR/report.md and PNG figures.")
