@@ -1,8 +1,11 @@
 """jaxsplit: structure-preserving (Poisson / symplectic) splitting integrators in JAX.
 
-The free rigid body is split into pieces whose flows are exact rotations; composition
-schemes stored as data turn those flows into integrators of any even order, stepped by a
-``lax.scan`` loop that jits, vmaps and differentiates.
+A system (``systems``: the free rigid body, or your own) declares its state, Poisson
+structure, Hamiltonian, Casimirs and its splits into pieces with exact flows; a scheme
+stored as data (``core.schemes``) composes those flows into one step (``core.compose``),
+which the ``lax.scan`` stepper (``core.integrate``) runs under jit, vmap and grad. The
+checks (``checks``) verify any map and any state; ``explore`` sweeps, maps stability,
+fits and tunes; ``paper`` audits the seed paper; ``cli`` is the command line.
 
 >>> import jax.numpy as jnp, jaxsplit
 >>> body = jaxsplit.RigidBody(jnp.array([2.0, 1.0, 2.0 / 3.0]))
@@ -12,80 +15,94 @@ schemes stored as data turn those flows into integrators of any even order, step
 
 from importlib.metadata import PackageNotFoundError, version
 
-from ._audit import audit_paper as audit_paper
-from ._body import PAPER_BODY as PAPER_BODY
-from ._body import PAPER_M0 as PAPER_M0
-from ._body import STANDARD_CASE as STANDARD_CASE
-from ._body import RigidBody as RigidBody
-from ._compose import Composition as Composition
-from ._compose import RolledComposition as RolledComposition
-from ._compose import compose as compose
-from ._compose import roll as roll
-from ._errors import InputError as InputError
-from ._exact import symmetric_solution as symmetric_solution
-from ._fit import FitResult as FitResult
-from ._fit import fit_inertia as fit_inertia
-from ._fit import integrate_checkpointed as integrate_checkpointed
-from ._fit import simulate_observations as simulate_observations
-from ._hamilton_poisson import HamiltonPoisson as HamiltonPoisson
-from ._hamilton_poisson import canonical_system as canonical_system
-from ._hamilton_poisson import constant_poisson_system as constant_poisson_system
-from ._hamilton_poisson import example_3_1 as example_3_1
-from ._hamilton_poisson import harmonic_oscillator as harmonic_oscillator
-from ._hamilton_poisson import rigid_body_system as rigid_body_system
-from ._integrate import Trajectory as Trajectory
-from ._integrate import integrate as integrate
-from ._invariants import InvariantErrors as InvariantErrors
-from ._invariants import invariant_errors as invariant_errors
-from ._invariants import monitor_invariants as monitor_invariants
-from ._order import OrderFit as OrderFit
-from ._order import estimate_order as estimate_order
-from ._order import fit_order as fit_order
-from ._order import global_errors as global_errors
-from ._order import ladder as ladder
-from ._poisson_check import DefectSummary as DefectSummary
-from ._poisson_check import PoissonSummary as PoissonSummary
-from ._poisson_check import defect_summary as defect_summary
-from ._poisson_check import growth_exponent as growth_exponent
-from ._poisson_check import orbit_symplectic_defect as orbit_symplectic_defect
-from ._poisson_check import poisson_defect as poisson_defect
-from ._poisson_check import poisson_summary as poisson_summary
-from ._poisson_check import symplectic_defect as symplectic_defect
-from ._poisson_check import symplectic_summary as symplectic_summary
-from ._rotations import hat as hat
-from ._rotations import rotate as rotate
-from ._rotations import rotation_matrix as rotation_matrix
-from ._runge_kutta import ButcherTableau as ButcherTableau
-from ._runge_kutta import CoefficientRungeKutta as CoefficientRungeKutta
-from ._runge_kutta import RungeKutta as RungeKutta
-from ._runge_kutta import explicit_euler as explicit_euler
-from ._runge_kutta import gauss_legendre as gauss_legendre
-from ._runge_kutta import gauss_legendre_tableau as gauss_legendre_tableau
-from ._runge_kutta import rk4 as rk4
-from ._runge_kutta import runge_kutta as runge_kutta
-from ._runge_kutta import runge_kutta_coefficients as runge_kutta_coefficients
-from ._runge_kutta import ruth as ruth
-from ._runge_kutta import tableaus as tableaus
-from ._runge_kutta import trapezoid as trapezoid
-from ._schemes import Scheme as Scheme
-from ._schemes import schemes as schemes
-from ._schemes import triple_jump as triple_jump
-from ._splitting import AxisRotation as AxisRotation
-from ._splitting import rigid_body_flows as rigid_body_flows
-from ._splitting import splitting as splitting
-from ._stability import stability_map as stability_map
-from ._sweep import reference_solution as reference_solution
-from ._sweep import sweep as sweep
-from ._sweep import sweep_cases as sweep_cases
-from ._tableau_checks import condition_2_7_defect as condition_2_7_defect
-from ._tableau_checks import order_conditions as order_conditions
-from ._tableau_checks import rooted_trees as rooted_trees
-from ._tableau_checks import symplecticity_matrix as symplecticity_matrix
-from ._tableau_checks import tableau_order as tableau_order
-from ._tune import TunedScheme as TunedScheme
-from ._tune import order4_coefficients as order4_coefficients
-from ._tune import random_bodies as random_bodies
-from ._tune import tune_scheme as tune_scheme
+from . import systems as systems
+from .checks._invariants import InvariantErrors as InvariantErrors
+from .checks._invariants import invariant_errors as invariant_errors
+from .checks._invariants import monitor_invariants as monitor_invariants
+from .checks._order import OrderFit as OrderFit
+from .checks._order import estimate_order as estimate_order
+from .checks._order import fit_order as fit_order
+from .checks._order import global_errors as global_errors
+from .checks._order import ladder as ladder
+from .checks._poisson import DefectSummary as DefectSummary
+from .checks._poisson import PoissonSummary as PoissonSummary
+from .checks._poisson import defect_summary as defect_summary
+from .checks._poisson import growth_exponent as growth_exponent
+from .checks._poisson import jacobi_defect as jacobi_defect
+from .checks._poisson import jacobi_summary as jacobi_summary
+from .checks._poisson import orbit_symplectic_defect as orbit_symplectic_defect
+from .checks._poisson import poisson_defect as poisson_defect
+from .checks._poisson import poisson_summary as poisson_summary
+from .checks._poisson import symplectic_defect as symplectic_defect
+from .checks._poisson import symplectic_summary as symplectic_summary
+from .checks._tableau import condition_2_7_defect as condition_2_7_defect
+from .checks._tableau import order_conditions as order_conditions
+from .checks._tableau import rooted_trees as rooted_trees
+from .checks._tableau import symplecticity_matrix as symplecticity_matrix
+from .checks._tableau import tableau_order as tableau_order
+from .classical._runge_kutta import ButcherTableau as ButcherTableau
+from .classical._runge_kutta import CoefficientRungeKutta as CoefficientRungeKutta
+from .classical._runge_kutta import RungeKutta as RungeKutta
+from .classical._runge_kutta import explicit_euler as explicit_euler
+from .classical._runge_kutta import gauss_legendre as gauss_legendre
+from .classical._runge_kutta import gauss_legendre_tableau as gauss_legendre_tableau
+from .classical._runge_kutta import rk4 as rk4
+from .classical._runge_kutta import runge_kutta as runge_kutta
+from .classical._runge_kutta import runge_kutta_coefficients as runge_kutta_coefficients
+from .classical._runge_kutta import tableaus as tableaus
+from .classical._runge_kutta import trapezoid as trapezoid
+from .classical._ruth import ruth as ruth
+from .core._compose import Composition as Composition
+from .core._compose import RolledComposition as RolledComposition
+from .core._compose import compose as compose
+from .core._compose import roll as roll
+from .core._errors import InputError as InputError
+from .core._flows import AbstractFlow as AbstractFlow
+from .core._flows import FunctionFlow as FunctionFlow
+from .core._flows import Substeps as Substeps
+from .core._integrate import Trajectory as Trajectory
+from .core._integrate import integrate as integrate
+from .core._integrate import integrate_checkpointed as integrate_checkpointed
+from .core._schemes import Scheme as Scheme
+from .core._schemes import schemes as schemes
+from .core._schemes import triple_jump as triple_jump
+from .explore._fit import ParameterFit as ParameterFit
+from .explore._fit import fit as fit
+from .explore._fit import simulate as simulate
+from .explore._fit_inertia import FitResult as FitResult
+from .explore._fit_inertia import fit_inertia as fit_inertia
+from .explore._fit_inertia import simulate_observations as simulate_observations
+from .explore._stability import stability_map as stability_map
+from .explore._sweep import reference_solution as reference_solution
+from .explore._sweep import sweep as sweep
+from .explore._sweep import sweep_cases as sweep_cases
+from .explore._tune import TunedScheme as TunedScheme
+from .explore._tune import order4_coefficients as order4_coefficients
+from .explore._tune import random_bodies as random_bodies
+from .explore._tune import tune_scheme as tune_scheme
+from .paper import audit_paper as audit_paper
+from .systems._base import AbstractSystem as AbstractSystem
+from .systems._hamilton_poisson import HamiltonPoisson as HamiltonPoisson
+from .systems._hamilton_poisson import canonical_system as canonical_system
+from .systems._hamilton_poisson import constant_poisson_system as constant_poisson_system
+from .systems._hamilton_poisson import example_3_1 as example_3_1
+from .systems._hamilton_poisson import harmonic_oscillator as harmonic_oscillator
+from .systems._hamilton_poisson import rigid_body_system as rigid_body_system
+from .systems._rigid_body import PAPER_BODY as PAPER_BODY
+from .systems._rigid_body import PAPER_M0 as PAPER_M0
+from .systems._rigid_body import STANDARD_CASE as STANDARD_CASE
+from .systems._rigid_body import RigidBody as RigidBody
+from .systems._rigid_body import symmetric_solution as symmetric_solution
+from .systems._splitting import splitting as splitting
+from .systems.so3 import AxisRotation as AxisRotation
+from .systems.so3 import VectorRotation as VectorRotation
+from .systems.so3 import hat as hat
+from .systems.so3 import quaternion_multiply as quaternion_multiply
+from .systems.so3 import quaternion_to_matrix as quaternion_to_matrix
+from .systems.so3 import rotate as rotate
+from .systems.so3 import rotate_about as rotate_about
+from .systems.so3 import rotation_matrix as rotation_matrix
+from .systems.so3 import rotation_matrix_about as rotation_matrix_about
 
 try:
     __version__ = version("jaxsplit")

@@ -10,7 +10,9 @@ import pytest
 
 import jaxsplit
 from jaxsplit import PAPER_BODY, RigidBody, hat, poisson_defect
-from jaxsplit._audit import (
+from jaxsplit.checks._poisson import random_unit_states
+from jaxsplit.cli import main
+from jaxsplit.paper._audit import (
     _PROVIDES,
     CLAIM_IDS,
     CLAIMS,
@@ -20,8 +22,6 @@ from jaxsplit._audit import (
     formula_4_3,
     formula_4_3_sequential,
 )
-from jaxsplit._poisson_check import random_unit_states
-from jaxsplit.cli import main
 
 ISSUE_IDS = ("ex2.1-i", "ex2.1-ii", "prop2.1", "prop2.2", "ex3.1-i", "ex3.1-ii", "ex3.1-iii", "ex3.1-iv",
              "prop3.1", "prop3.2", "thm4.1", "prop4.2", "order2", "order4", "order2n+2", "stages", "rem4.1",

@@ -132,7 +132,7 @@ def _first_overflow_step():
 
 
 def test_nonfinite_state_stops_reports_and_keeps_the_work(capsys, tmp_path, monkeypatch):
-    monkeypatch.setattr("jaxsplit._splitting.splitting", _doubling)
+    monkeypatch.setattr("jaxsplit.systems._splitting.splitting", _doubling)
     out = tmp_path / "blowup.npz"
     rc = main(["simulate", "--m0", "1,0,0", "--steps", "5000", "--save-every", "100", "--out", str(out)])
     captured = capsys.readouterr()
@@ -181,7 +181,7 @@ def test_check_reports_a_non_poisson_map_and_a_wrong_order(capsys, monkeypatch):
     def euler(body, scheme, split="axes", **kwargs):
         return lambda m, h: m + h * body.vector_field(m)
 
-    monkeypatch.setattr("jaxsplit._splitting.splitting", euler)
+    monkeypatch.setattr("jaxsplit.systems._splitting.splitting", euler)
     assert main(["check", "--scheme", "strang", "--json", "--states", "4", "--t-end", "1"]) == 1
     r = _json_out(capsys)
     assert not r["poisson_ok"] and r["poisson_defect_max"] > 1e-6
@@ -240,7 +240,7 @@ def test_figure_is_a_png_of_legible_size(capsys, tmp_path):
 
 
 def test_ctrl_c_keeps_the_finished_chunks(capsys, tmp_path, monkeypatch):
-    import jaxsplit._integrate as integrate_module
+    import jaxsplit.core._integrate as integrate_module
 
     real, calls = integrate_module.integrate, []
 

@@ -129,7 +129,7 @@ def test_resume_refuses_different_inputs(uninterrupted, capsys):
 
 
 def test_results_hold_the_cases_and_the_library_results(uninterrupted):
-    from jaxsplit._sweep import sweep, sweep_cases
+    from jaxsplit import sweep, sweep_cases
 
     with np.load(uninterrupted / "results.npz") as z:
         results = {k: z[k] for k in z.files}

@@ -65,7 +65,7 @@ def test_invalid_schemes_are_refused(kwargs, message):
 
 
 def test_valid_user_scheme_can_be_registered_and_used():
-    registry = jaxsplit._schemes.SchemeRegistry()
+    registry = jaxsplit.core._schemes.SchemeRegistry()
     scheme = registry.register(Scheme("my-strang", 2, "lie-adjoint", (0.5, 0.5)))
     assert registry["my-strang"] is scheme and "my-strang" in list(registry)
 

@@ -27,7 +27,7 @@ from jaxsplit import (
     symplectic_defect,
     symplectic_summary,
 )
-from jaxsplit._poisson_check import growth_exponent, random_unit_states
+from jaxsplit.checks._poisson import growth_exponent, random_unit_states
 
 POISSON_TOL = 1e-12
 EULER_FLOOR = 1e-4  # explicit Euler at h = 0.1 (measured ~5e-3)

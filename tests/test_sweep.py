@@ -7,7 +7,8 @@ import pytest
 
 import jaxsplit
 from jaxsplit import InputError
-from jaxsplit._sweep import _case_kernel, _shift_axes
+from jaxsplit.explore._batch import resolved_groups
+from jaxsplit.explore._sweep import _case_kernel
 
 REFERENCE_TOL = 1e-13  # reference_solution vs the 30-digit value of the standard case
 HALF_STEP_TOL = 1e-12  # |reference - the half-step-count run|, a bound on the reference error
@@ -72,22 +73,25 @@ def test_poisson_defect_is_roundoff_even_at_large_steps():
 
 def test_chunking_does_not_change_results():
     cases = jaxsplit.sweep_cases(sampling="random", n_samples=37, seed=1, h_range=(0.05, 0.3))
-    big = jaxsplit.sweep("suzuki-5", cases, t_end=3.0, split="casimir", shift_axis=2, chunk_size=1024)
-    small = jaxsplit.sweep("suzuki-5", cases, t_end=3.0, split="casimir", shift_axis=2, chunk_size=8)
+    big = jaxsplit.sweep("suzuki-5", cases, t_end=3.0, split="casimir", shift=1, chunk_size=1024)
+    small = jaxsplit.sweep("suzuki-5", cases, t_end=3.0, split="casimir", shift=1, chunk_size=8)
     for key in big:
         assert np.max(np.abs(np.asarray(big[key], float) - np.asarray(small[key], float))) <= CHUNK_TOL, key
     k = 11
     body = jaxsplit.RigidBody(jnp.asarray(cases["inertia"][k]))
-    direct = jaxsplit.integrate(jaxsplit.splitting(body, "suzuki-5", "casimir", shift_axis=2),
+    direct = jaxsplit.integrate(jaxsplit.splitting(body, "suzuki-5", "casimir", shift=1),
                                 jnp.asarray(cases["m0"][k]), big["h"][k], int(big["n_steps"][k]))
     assert np.max(np.abs(np.asarray(direct) - big["m_final"][k])) < MATCH_TOL
 
 
 def test_auto_shift_axis_is_the_middle_inverse_moment():
     inertia = np.array([[2.0, 1.0, 2 / 3], [1.0, 3.0, 2.0], [1.0, 0.5, 0.8]])
-    axes = _shift_axes(inertia, "auto")
-    for row, k in zip(inertia, axes):
-        assert k == jaxsplit._splitting.auto_shift_axis(jaxsplit.RigidBody(row)) + 1
+    groups = resolved_groups(jaxsplit.RigidBody, inertia, "casimir", {"shift": "auto"})
+    assert sorted(i for *_, idx in groups for i in idx) == [0, 1, 2]
+    for name, options, idx in groups:
+        for row in inertia[idx]:
+            assert name == "casimir" and options["shift"] == int(np.argsort(1 / row)[1])
+            assert options["shift"] == jaxsplit.RigidBody(row).shift_axis("auto")
 
 
 def test_dtype_follows_the_cases():
@@ -97,7 +101,7 @@ def test_dtype_follows_the_cases():
 
 
 def test_device_memory_is_bounded_per_chunk():
-    fn = jax.jit(_case_kernel(jaxsplit.schemes["kahan-li-8"], "axes", "auto"))
+    fn = jax.jit(_case_kernel(jaxsplit.RigidBody, jaxsplit.schemes["kahan-li-8"], "axes", ()))
     sizes = {}
     for b in (16, 128):
         args = (jnp.ones((b, 3)), jnp.ones((b, 3)), jnp.ones(b), jnp.ones(b, dtype=jnp.int64))
@@ -110,7 +114,7 @@ def test_device_memory_is_bounded_per_chunk():
     ({"t_end": -1.0}, "t_end"),
     ({"t_end": 1.0, "chunk_size": 0}, "chunk_size"),
     ({"t_end": 1.0, "split": "diagonal"}, "split"),
-    ({"t_end": 1.0, "shift_axis": 4, "split": "casimir"}, "shift_axis"),
+    ({"t_end": 1.0, "shift": 3, "split": "casimir"}, "shift"),
 ])
 def test_bad_arguments(kwargs, match):
     cases = jaxsplit.sweep_cases(states=2)

@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 
 import jaxsplit
-from jaxsplit._runge_kutta import ButcherTableau, gauss_legendre_tableau, tableaus
-from jaxsplit._tableau_checks import (
+from jaxsplit.checks._tableau import (
     condition_2_7_defect,
     is_explicit,
     order_conditions,
@@ -19,6 +18,7 @@ from jaxsplit._tableau_checks import (
     tableau_order,
     tree_density,
 )
+from jaxsplit.classical._runge_kutta import ButcherTableau, gauss_legendre_tableau, tableaus
 
 CONDITION_TOL = 1e-14  # (2.7) on coefficients given to 16 digits
 VIOLATION_FLOOR = 1e-3  # methods that violate (2.7) do so by O(1) amounts

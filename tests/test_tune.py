@@ -5,7 +5,7 @@ import pytest
 
 import jaxsplit
 from jaxsplit import InputError
-from jaxsplit._tune import order4_parameters
+from jaxsplit.explore._tune import order4_parameters
 
 CONDITION_TOL = 1e-14  # Σγ − 1 and Σγ³ for any free parameters
 ORDER_TOL = 0.25  # measured order of the learned method vs 4
@@ -66,8 +66,8 @@ def test_bad_arguments():
     inertias, states = jaxsplit.random_bodies(2)
     with pytest.raises(InputError, match="stages"):
         jaxsplit.tune_scheme(inertias, states, stages=4)
-    with pytest.raises(InputError, match="shift_axis"):
-        jaxsplit.tune_scheme(inertias, states, split="casimir", shift_axis="auto")
+    with pytest.raises(InputError, match="auto"):
+        jaxsplit.tune_scheme(inertias, states, split="casimir", shift="auto")
     with pytest.raises(InputError, match="states"):
         jaxsplit.tune_scheme(inertias, states[:1])
     with pytest.raises(InputError, match="start"):

@@ -10,7 +10,7 @@ import importlib
 import re
 import sys
 
-from .._errors import InputError
+from ..core._errors import InputError
 
 COMMANDS = ("simulate", "schemes", "check", "sweep", "fit", "paper")
 

@@ -22,7 +22,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._errors import InputError
+from ..core._errors import InputError
 
 EXIT_OK = 0
 EXIT_INPUT = 2
@@ -134,7 +134,7 @@ def check_body(inertia, allow_nonphysical: bool):
     """A RigidBody from a parsed --inertia, refusing non-physical bodies unless allowed."""
     import jax.numpy as jnp
 
-    from .._body import RigidBody
+    from ..systems._rigid_body import RigidBody
 
     if not all(v > 0 for v in inertia):
         raise InputError(f"--inertia must be positive (I1,I2,I3 > 0), got {fmt_vec(inertia)}")
@@ -406,7 +406,7 @@ def _finite_rows(x: np.ndarray) -> np.ndarray:
 def first_nonfinite(step, x, h, n: int) -> tuple[int, np.ndarray]:
     """Within ``n`` steps from the finite state ``x``: (first step k >= 1 whose state is not
     finite, the state after k - 1 steps). Narrows down by blocks, 1024 saves at a time."""
-    from .._integrate import integrate
+    from ..core._integrate import integrate
 
     offset = 0
     while True:
@@ -434,7 +434,7 @@ def run_chunked(step, x0, h, n_steps: int, save_every: int, *, flows_per_step: i
     so far are returned (with the last good state)."""
     import jax.numpy as jnp
 
-    from .._integrate import integrate
+    from ..core._integrate import integrate
 
     chunk = chunk or chunk_size(n_steps, save_every, flows_per_step)
     aligned = chunk % save_every == 0  # else save_every > chunk: saves fall on chunk ends
@@ -496,10 +496,10 @@ def run_chunked(step, x0, h, n_steps: int, save_every: int, *, flows_per_step: i
 
 
 def resolve_scheme_and_shift(args, body):
-    """The scheme named by ``--scheme`` and the 1-based Casimir shift axis (``None`` for the
-    axes split), refusing a scheme that does not fit ``--split`` and a stray ``--shift-axis``."""
-    from .._schemes import schemes
-    from .._splitting import auto_shift_axis
+    """The scheme named by ``--scheme`` and the Casimir shift axis as the CLI labels it,
+    1, 2 or 3 like I1, I2, I3 (``None`` for the axes split; the library's ``shift`` is this
+    minus one), refusing a scheme that does not fit ``--split`` and a stray ``--shift-axis``."""
+    from ..core._schemes import schemes
 
     scheme = schemes[args.scheme]
     if not scheme.pieces_allowed(3 if args.split == "axes" else 2):
@@ -509,5 +509,10 @@ def resolve_scheme_and_shift(args, body):
         raise InputError("--shift-axis applies only with --split casimir")
     shift = "auto" if args.shift_axis in (None, "auto") else int(args.shift_axis)
     if args.split == "casimir" and shift == "auto":
-        shift = auto_shift_axis(body) + 1
+        shift = body.shift_axis("auto") + 1
     return scheme, shift
+
+
+def split_options(split: str, shift) -> dict:
+    """The library's split options from the CLI's 1-based ``--shift-axis`` label."""
+    return {"shift": int(shift) - 1} if split == "casimir" else {}

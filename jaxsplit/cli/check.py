@@ -13,9 +13,9 @@ import argparse
 
 import numpy as np
 
-from .._body import PAPER_BODY, PAPER_M0, STANDARD_CASE
-from .._errors import InputError
-from .._order import ORDER_WINDOW
+from ..checks._order import ORDER_WINDOW
+from ..core._errors import InputError
+from ..systems._rigid_body import PAPER_BODY, PAPER_M0, STANDARD_CASE
 from . import _common as c
 
 POISSON_TOL = 1e-12  # a Poisson map's defect is round-off: ~1e-16 per unit of |m|
@@ -61,25 +61,13 @@ def add_parser(sub):
     p.set_defaults(func=run)
 
 
-def _poisson_defect_fn():
-    try:
-        from .._poisson_check import poisson_defect
-    except ImportError:  # the verification module is optional: same formula, locally
-        import jax
-
-        def poisson_defect(step, poisson_matrix, x, h):
-            jac = jax.jacfwd(lambda y: step(y, h))(x)
-            return jax.numpy.max(jax.numpy.abs(jac @ poisson_matrix(x) @ jac.T - poisson_matrix(step(x, h))))
-    return poisson_defect
-
-
 MAX_COUNT = 2**17  # largest step count of an adapted ladder (12 x 2^17 saved states ~ 38 MB)
 
 
 def _measure_order(step, m0, t_end, reference, start, adapt=True):
     """Fit the order over ``ladder(start)``; when the errors miss the fit window, move the
     ladder (x16 or /16, at most twice) towards it. Returns (fit or None, note, counts, hs, errs)."""
-    from .._order import fit_order, global_errors, ladder
+    from ..checks._order import fit_order, global_errors, ladder
 
     tried = set()
     while True:
@@ -107,30 +95,30 @@ def run(args):
     import jax
     import jax.numpy as jnp
 
-    from .._exact import symmetric_solution, symmetry_axis
-    from .._splitting import splitting
+    from ..checks._poisson import poisson_defect
+    from ..systems._rigid_body import symmetric_solution
+    from ..systems._splitting import splitting
 
     body = c.check_body(args.inertia, args.allow_nonphysical)
     scheme, shift = c.resolve_scheme_and_shift(args, body)
     m0 = jnp.asarray(args.m0, dtype=jnp.float64)
     if not np.any(np.asarray(args.m0)):
         raise InputError("--m0 must be non-zero (the order is measured on a moving state)")
-    kwargs = {"shift_axis": shift} if args.split == "casimir" else {}
+    kwargs = c.split_options(args.split, shift)
     step = splitting(body, scheme, args.split, **kwargs)
 
     # ---- Poisson defect over random unit states
     rng = np.random.default_rng(args.seed)
     xs = rng.standard_normal((args.states, 3))
     xs /= np.linalg.norm(xs, axis=1, keepdims=True)
-    defect = _poisson_defect_fn()
-    defects = np.asarray(jax.jit(jax.vmap(lambda x: defect(step, body.poisson_matrix, x, args.dt)))(jnp.asarray(xs)))
+    defects = np.asarray(jax.jit(jax.vmap(lambda x: poisson_defect(step, body, x, args.dt)))(jnp.asarray(xs)))
     worst = int(np.argmax(defects))
     poisson_ok = bool(defects[worst] <= POISSON_TOL)
 
     # ---- measured order
     t_end = args.t_end
     try:
-        axis = symmetry_axis(body)
+        axis = body.symmetry_axis()
     except InputError:
         axis = None
     standard = (np.allclose(args.inertia, STANDARD_CASE.inertia, rtol=1e-15, atol=0)
@@ -140,7 +128,7 @@ def run(args):
     elif standard:
         reference, ref_kind, ref_acc = jnp.asarray(STANDARD_CASE.reference), "30-digit (standard case)", 1e-16
     else:
-        from .._sweep import reference_solution
+        from ..explore._sweep import reference_solution
 
         ref, acc = reference_solution(np.asarray(m0)[None], np.asarray(args.inertia, dtype=float)[None], t_end)
         reference, ref_kind, ref_acc = jnp.asarray(ref[0]), "kahan-li-8, Casimir split, step halving", float(acc[0])

@@ -11,8 +11,8 @@ import zipfile
 
 import numpy as np
 
-from .._errors import InputError
-from .._fit import fit_inertia
+from ..core._errors import InputError
+from ..explore._fit_inertia import fit_inertia
 
 EXAMPLES = """examples:
   jaxsplit fit --data obs.npz                    # assumes I1 = 1 and says so

@@ -26,7 +26,7 @@ def add_parser(sub):
 
 
 def run(args):
-    from .._audit import audit_paper
+    from ..paper._audit import audit_paper
 
     start = time.perf_counter()
     claims = None if args.claims is None else [c.strip() for c in args.claims.split(",") if c.strip()]

@@ -2,7 +2,7 @@
 
 import argparse
 
-from .._schemes import schemes
+from ..core._schemes import schemes
 from . import _common as c
 
 EXAMPLES = """\

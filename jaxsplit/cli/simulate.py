@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .._body import PAPER_BODY, PAPER_M0
-from .._errors import InputError
+from ..core._errors import InputError
+from ..systems._rigid_body import PAPER_BODY, PAPER_M0
 from . import _common as c
 
 DEFAULT_DT = 0.01
@@ -167,8 +167,8 @@ def _default_outputs(args, when: str):
 def run(args):
     import jax.numpy as jnp
 
-    from .._exact import symmetric_solution, symmetry_axis
-    from .._splitting import splitting
+    from ..systems._rigid_body import symmetric_solution
+    from ..systems._splitting import splitting
 
     # ---- validate everything before any work
     body = c.check_body(args.inertia, args.allow_nonphysical)
@@ -185,12 +185,12 @@ def run(args):
     when = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
     out, fmt, figure = _output_paths(args, when)
     try:
-        axis = symmetry_axis(body)
+        axis = body.symmetry_axis()
     except InputError:
         axis = None
 
     # ---- run
-    kwargs = {"shift_axis": shift} if args.split == "casimir" else {}
+    kwargs = c.split_options(args.split, shift)
     step = splitting(body, scheme, args.split, **kwargs)
     progress = c.Progress(n_steps, enabled=not args.quiet)
     result = c.run_chunked(step, jnp.asarray(m0), args.dt, n_steps, save_every,
@@ -243,7 +243,7 @@ def run(args):
         _write_trajectory(out, fmt, arrays, meta)
         written["trajectory"] = str(out)
     if figure is not None:
-        from .. import _plots
+        from . import _figures as _plots
 
         title = (f"{scheme.name} ({args.split} split), I = ({c.fmt_vec(args.inertia)}), "
                  f"m0 = ({c.fmt_vec(m0)}), h = {args.dt:g}, {result.completed:,} steps"

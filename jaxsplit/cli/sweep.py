@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._errors import InputError
+from ..core._errors import InputError
 from . import _common as c
 
 MANIFEST = "manifest.json"
@@ -92,7 +92,7 @@ def _library_default(name):
     """A keyword default of ``jaxsplit._sweep.sweep``, so the CLI never drifts from the library."""
     import inspect
 
-    from .._sweep import sweep
+    from ..explore._sweep import sweep
 
     return inspect.signature(sweep).parameters[name].default
 
@@ -148,7 +148,7 @@ def add_parser(sub):
 
 def _inputs(args) -> dict:
     """Every input that determines the results (compared on --resume)."""
-    from .._schemes import schemes
+    from ..core._schemes import schemes
 
     scheme = schemes[args.scheme].name
     reference = schemes[args.reference_scheme].name
@@ -180,7 +180,7 @@ def _inputs(args) -> dict:
 
 
 def _cases(inputs: dict) -> dict:
-    from .._sweep import physical, sweep_cases
+    from ..explore._sweep import physical, sweep_cases
 
     if inputs["sampling"] == "grid":
         ratios = np.asarray(inputs["ratios"], dtype=float)
@@ -254,7 +254,7 @@ class _Terminated(KeyboardInterrupt):
 
 
 def run(args):
-    from .._sweep import sweep
+    from ..explore._sweep import sweep
 
     inputs = _inputs(args)
     cases = _cases(inputs)
@@ -296,8 +296,9 @@ def run(args):
         for k in todo:
             lo, hi = k * size, min(n, (k + 1) * size)
             piece = {key: np.asarray(v)[lo:hi] for key, v in cases.items()}
-            res = sweep(inputs["scheme"], piece, t_end=inputs["t_end"], split=inputs["split"],
-                        shift_axis=_shift(inputs["shift_axis"]), reference_scheme=inputs["reference_scheme"],
+            shift = {"shift": _shift(inputs["shift_axis"])} if inputs["split"] == "casimir" else {}
+            res = sweep(inputs["scheme"], piece, t_end=inputs["t_end"], split=inputs["split"], **shift,
+                        reference_scheme=inputs["reference_scheme"],
                         reference_angle=inputs["reference_angle"], chunk_size=max(1, hi - lo))
             c.save_npz(_chunk_path(out, k), {"case_index": np.arange(lo, hi)} | {
                 key: np.asarray(v) for key, v in res.items()})
@@ -326,7 +327,8 @@ def run(args):
 
 
 def _shift(value):
-    return "auto" if value in (None, "auto") else int(value)
+    """The library's 0-based shift from the CLI's 1-based --shift-axis label (or "auto")."""
+    return "auto" if value in (None, "auto") else int(value) - 1
 
 
 def _chunk_ok(path: Path) -> bool:

@@ -17,71 +17,58 @@ Instances from the seed paper:
   for Propositions 2.1–3.2 (any H, constant Π).
 """
 
-import dataclasses
 from collections.abc import Callable
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._body import RigidBody
-from ._errors import InputError
-from ._rotations import hat
+from ..core._errors import InputError
+from ._base import AbstractSystem
+from ._rigid_body import RigidBody
+from .so3 import hat
 
 Partial = jax.tree_util.Partial
 
 
-@jax.tree_util.register_pytree_node_class
-@dataclasses.dataclass(frozen=True)
-class HamiltonPoisson:
-    """A Hamilton–Poisson system (Rⁿ, Π, H); ``vector_field(x) = Π(x) ∇H(x)``.
+class HamiltonPoisson(AbstractSystem):
+    """A Hamilton–Poisson system (Rⁿ, Π, H) from two functions; ``vector_field(x) = Π(x) ∇H(x)``.
 
     ``invariants`` maps names to functions x -> scalar that the flow conserves (H is
-    always monitored as ``"energy"``); they are used by ``monitor_invariants``.
+    always monitored as ``"energy"``). It offers no split: its steps are Runge–Kutta
+    methods (``jaxsplit.runge_kutta``) or flows the user composes.
     """
 
-    poisson_matrix: Callable
-    hamiltonian: Callable
-    invariants: tuple = ()  # ((name, function), ...)
-    name: str = "hamilton-poisson"
+    poisson_fn: Callable
+    hamiltonian_fn: Callable
+    declared: tuple
+    label: str = eqx.field(static=True)
 
-    def __post_init__(self):
-        if not callable(self.poisson_matrix) or not callable(self.hamiltonian):
+    def __init__(self, poisson_matrix, hamiltonian, invariants=(), name: str = "hamilton-poisson"):
+        if not callable(poisson_matrix) or not callable(hamiltonian):
             raise InputError("HamiltonPoisson needs callables poisson_matrix(x) and hamiltonian(x)")
-        inv = tuple(self.invariants.items()) if isinstance(self.invariants, dict) else tuple(self.invariants)
+        inv = tuple(invariants.items()) if isinstance(invariants, dict) else tuple(invariants)
         for item in inv:
             if not (isinstance(item, tuple) and len(item) == 2 and isinstance(item[0], str) and callable(item[1])):
                 raise InputError(f"invariants must be (name, function) pairs, got {item!r}")
-        object.__setattr__(self, "invariants", inv)
+        self.poisson_fn, self.hamiltonian_fn, self.declared, self.label = poisson_matrix, hamiltonian, inv, name
+
+    @property
+    def name(self) -> str:
+        return self.label
+
+    def poisson_matrix(self, x):
+        return self.poisson_fn(x)
+
+    def hamiltonian(self, x):
+        return self.hamiltonian_fn(x)
+
+    def invariants(self):
+        return {"energy": self.hamiltonian_fn, **dict(self.declared)}
 
     def gradient(self, x):
-        return jax.grad(self.hamiltonian)(x)
-
-    def vector_field(self, x):
-        """ẋ = Π(x) ∇H(x)."""
-        return self.poisson_matrix(x) @ self.gradient(x)
-
-    def bracket(self, f, g, x):
-        """{f, g}(x) = ∇f(x)ᵀ Π(x) ∇g(x)."""
-        return jax.grad(f)(x) @ self.poisson_matrix(x) @ jax.grad(g)(x)
-
-    def monitored(self) -> tuple:
-        """(name, function) pairs: the energy first, then the declared invariants."""
-        return (("energy", self.hamiltonian),) + self.invariants
-
-    def tree_flatten(self):
-        names = tuple(n for n, _ in self.invariants)
-        return (self.poisson_matrix, self.hamiltonian, tuple(f for _, f in self.invariants)), (names, self.name)
-
-    @classmethod
-    def tree_unflatten(cls, aux, children):
-        names, name = aux
-        obj = object.__new__(cls)
-        object.__setattr__(obj, "poisson_matrix", children[0])
-        object.__setattr__(obj, "hamiltonian", children[1])
-        object.__setattr__(obj, "invariants", tuple(zip(names, children[2])))
-        object.__setattr__(obj, "name", name)
-        return obj
+        return jax.grad(self.hamiltonian_fn)(x)
 
 
 # ---------------------------------------------------------------- the rigid body

@@ -27,10 +27,11 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from ._body import RigidBody
-from ._errors import InputError
-from ._schemes import Scheme
-from ._splitting import SPLITS, splitting
+from ..core._errors import InputError
+from ..core._schemes import Scheme
+from ..core._state import as_state, leading_size
+from ..systems._splitting import splitting
+from ._batch import build, family_of
 from ._sweep import reference_solution
 
 
@@ -70,55 +71,63 @@ class TunedScheme(NamedTuple):
     scan_loss: np.ndarray
 
 
-def _check_set(inertias, states):
-    inertias = np.asarray(inertias, dtype=float)
-    states = np.asarray(states, dtype=float)
-    if inertias.ndim != 2 or inertias.shape[1] != 3 or not np.all(np.isfinite(inertias) & (inertias > 0)):
-        raise InputError(f"inertias must be positive, shape (n, 3); got shape {inertias.shape}")
-    if states.shape != inertias.shape or not np.all(np.isfinite(states)):
-        raise InputError(f"states must be finite with the inertias' shape {inertias.shape}, got {states.shape}")
-    return inertias, states
+def _check_set(params, states, family):
+    params = jax.tree_util.tree_map(lambda a: np.asarray(a, dtype=float), params)
+    states = jax.tree_util.tree_map(np.asarray, as_state(states, "states"))
+    n = leading_size(params, "the training parameters")
+    if leading_size(states, "states") != n:
+        raise InputError(f"states must hold one state per training system ({n}) along the leading axis")
+    if not all(np.all(np.isfinite(a)) for a in jax.tree_util.tree_leaves((params, states))):
+        raise InputError("training parameters and states must be finite")
+    build(family, params)  # validates the concrete batch
+    return params, states
 
 
-def tune_scheme(inertias, states, *, stages: int = 5, t_end: float = 10.0, n_steps: int = 40,
-                split: str = "axes", shift_axis: int = 2, start=None, iterations: int = 200,
-                learning_rate: float = 0.02, scan_points: int = 201, scan_range=(-3.0, 3.0),
-                name: str | None = None) -> TunedScheme:
+def tune_scheme(params, states, *, system=None, stages: int = 5, t_end: float = 10.0, n_steps: int = 40,
+                split: str | None = "axes", start=None, iterations: int = 200, learning_rate: float = 0.02,
+                scan_points: int = 201, scan_range=(-3.0, 3.0), name: str | None = None,
+                **split_options) -> TunedScheme:
     """Learn an order-4, ``stages``-stage symmetric composition of Strang for the training
-    bodies ``inertias`` (n, 3) started at ``states`` (n, 3), integrated to ``t_end`` with
-    ``n_steps`` steps. ``start`` (free parameters, default Suzuki's fractal, z = 1) is also
-    the baseline of the objective; with one free parameter a scan over ``scan_range`` of
-    ``scan_points`` values picks the start if it beats ``start``. ``split="casimir"``
-    needs an explicit ``shift_axis`` (the bodies are traced)."""
+    systems ``system(params[i])`` (default ``RigidBody``: ``params`` are inertias (n, 3))
+    started at ``states`` (leading axis n), integrated to ``t_end`` with ``n_steps`` steps.
+    ``start`` (free parameters, default Suzuki's fractal, z = 1) is also the baseline of the
+    objective; with one free parameter a scan over ``scan_range`` of ``scan_points`` values
+    picks the start if it beats ``start``. The systems are traced (one compilation for the
+    whole set), so split options must be explicit (the rigid body's Casimir split needs
+    ``shift=0, 1 or 2``, not "auto")."""
     if not (isinstance(stages, int) and stages >= 5 and stages % 2 == 1):
         raise InputError(f"stages must be an odd integer >= 5 (3 stages leave no freedom), got {stages!r}")
-    if split not in SPLITS:
-        raise InputError(f"split must be one of {SPLITS}, got {split!r}")
-    if split == "casimir" and shift_axis not in (1, 2, 3):
-        raise InputError(f"split='casimir' needs shift_axis 1, 2 or 3, got {shift_axis!r}")
+    family = family_of(system)
+    if any(isinstance(v, str) and v == "auto" for v in split_options.values()):
+        raise InputError("tune_scheme runs every training system in one traced batch: give explicit split "
+                         f"options, not 'auto' (got {split_options})")
     if not (isinstance(n_steps, int) and n_steps >= 1):
         raise InputError(f"n_steps must be an integer >= 1, got {n_steps!r}")
-    inertias, states = _check_set(inertias, states)
+    params, states = _check_set(params, states, family)
+    first = build(family, jax.tree_util.tree_map(lambda a: a[0], params))
+    first.split(split, **split_options)  # a clear error now for an unknown split or option
     k = (stages - 1) // 2
     dtype = jnp.result_type(float)
     start = np.ones(k - 1) if start is None else np.asarray(start, dtype=float).reshape(-1)
     if start.shape != (k - 1,):
         raise InputError(f"start must hold {k - 1} free parameters for {stages} stages, got {start.shape}")
-    reference, _ = reference_solution(states.astype(dtype), inertias.astype(dtype), float(t_end))
-    ref = jnp.asarray(reference, dtype)
-    bodies, m0s = jnp.asarray(inertias, dtype), jnp.asarray(states, dtype)
+    reference, _ = reference_solution(jax.tree_util.tree_map(lambda a: a.astype(dtype), states),
+                                      jax.tree_util.tree_map(lambda a: a.astype(dtype), params), float(t_end),
+                                      system=family)
+    ref = jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), reference)
+    batch = jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), params)
+    x0s = jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), states)
     h = jnp.asarray(t_end / n_steps, dtype)
-    shift = shift_axis if split == "casimir" else "auto"
 
     def errors(z):
         gammas = order4_coefficients(z)
 
-        def one(inertia, m0, r):
-            strang = splitting(RigidBody(inertia), "strang", split, shift_axis=shift)
-            m = jax.lax.fori_loop(0, n_steps, lambda _, y: _composed(strang, gammas, y, h), m0)
-            return jnp.sum((m - r) ** 2)
+        def one(p, x0, r):
+            strang = splitting(family(p), "strang", split, **split_options)
+            x = jax.lax.fori_loop(0, n_steps, lambda _, y: _composed(strang, gammas, y, h), x0)
+            return sum(jnp.sum((a - b) ** 2) for a, b in zip(jax.tree_util.tree_leaves(x), jax.tree_util.tree_leaves(r)))
 
-        return jax.vmap(one)(bodies, m0s, ref)
+        return jax.vmap(one)(batch, x0s, ref)
 
     errors = jax.jit(errors)
     base = errors(jnp.asarray(start, dtype))
@@ -158,7 +167,7 @@ def tune_scheme(inertias, states, *, stages: int = 5, t_end: float = 10.0, n_ste
     gammas = np.asarray(order4_coefficients(np.asarray(z, dtype=float)))
     label = name or f"tuned-ss{stages}-order4"
     scheme = Scheme(label, 4, "symmetric", tuple(float(g) for g in gammas),
-                    f"learned with optax (jaxsplit.tune_scheme) on {len(inertias)} bodies, "
+                    f"learned with optax (jaxsplit.tune_scheme) on {leading_size(params, 'params')} systems, "
                     f"h = {float(t_end / n_steps):.4g}, split {split}")
     return TunedScheme(scheme, np.asarray(z), np.asarray(start), float(loss), np.asarray(history),
                        scan_z, scan_loss)

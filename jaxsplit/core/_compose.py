@@ -1,27 +1,25 @@
-"""One generic composer: (exact flows, scheme) -> a pure ``step(state, h)``.
+"""One generic composer: (flows, scheme) -> a ``Composition``, itself a flow.
 
 A scheme is first reduced to a *word*: the sequence of (piece, weight) sub-flows, the
-first entry acting first. Because every piece is an exact flow, hence a one-parameter
-group (φ_a ∘ φ_b = φ_{a+b}), adjacent sub-flows of the same piece merge into one. When a
-word begins and ends with the same piece (every symmetric scheme), consecutive steps
-merge across the step boundary as well (first-same-as-last); ``Composition.advance``
-does that inside its ``lax.scan``.
-
-A flow is any pure function ``flow(state, t, params) -> state`` that is the exact
-time-t flow of one piece; the state may be any PyTree.
+first entry acting first. Adjacent sub-flows of the same piece merge into one when that
+piece is an exact one-parameter group (φ_a ∘ φ_b = φ_{a+b}). When a word begins and ends
+with the same group piece (every symmetric scheme), consecutive steps merge across the step
+boundary as well (first-same-as-last); ``Composition.advance`` does that inside its
+``lax.scan``. ``roll`` gives the same map with the word as array data, so that every scheme
+of a given word length shares one compilation.
 """
 
-import dataclasses
-import functools
-from collections.abc import Callable, Sequence
-from typing import Any
+from collections.abc import Sequence
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from ._errors import InputError
+from ._flows import AbstractFlow, as_flow
 from ._schemes import Scheme, schemes
+from ._state import float_dtype
 
 Word = tuple[tuple[int, float], ...]
 
@@ -31,7 +29,8 @@ def word(scheme: Scheme, n_pieces: int) -> Word:
     if not scheme.pieces_allowed(n_pieces):
         raise InputError(
             f"scheme {scheme.name!r} ({scheme.form}) needs exactly 2 pieces, "
-            f"the splitting has {n_pieces}; use split='casimir' or a non-partitioned scheme"
+            f"the splitting has {n_pieces}; use a two-piece split (e.g. split='casimir') or a "
+            "non-partitioned scheme"
         )
     c = scheme.coefficients
 
@@ -53,11 +52,12 @@ def word(scheme: Scheme, n_pieces: int) -> Word:
     return tuple((p, w) for p, w in entries if w != 0.0)
 
 
-def merge(w: Word) -> Word:
-    """Merge adjacent sub-flows of the same piece (exact for one-parameter groups)."""
+def merge(w: Word, mergeable=None) -> Word:
+    """Merge adjacent sub-flows of the same piece; ``mergeable[p]`` False keeps piece p's
+    sub-flows apart (only exact one-parameter groups merge)."""
     out: list[list] = []
     for piece, weight in w:
-        if out and out[-1][0] == piece:
+        if out and out[-1][0] == piece and (mergeable is None or mergeable[piece]):
             out[-1][1] += weight
             if out[-1][1] == 0.0:
                 out.pop()
@@ -66,32 +66,39 @@ def merge(w: Word) -> Word:
     return tuple((p, w) for p, w in out)
 
 
-def _apply(flows, params, w: Word, state, h):
+def _apply(flows, w: Word, state, h):
     for piece, weight in w:
         # The barrier keeps XLA from fusing a whole step into one kernel that recomputes
         # earlier sub-flows: without it the cost grows geometrically with the word length
         # (Kahan-Li 6 on the axes split: minutes per step), with it ~20 ns per rotation.
-        state = jax.lax.optimization_barrier(flows[piece](state, weight * h, params))
+        state = jax.lax.optimization_barrier(flows[piece](state, weight * h))
     return state
 
 
-@jax.tree_util.register_pytree_node_class
-@dataclasses.dataclass(frozen=True)
-class Composition:
-    """A composed one-step map; call it as ``step(state, h)``.
+def _like_state(h, state):
+    """The step size in the state's floating dtype (never the other way round)."""
+    return jnp.asarray(h, dtype=float_dtype(state))
 
-    ``params`` (e.g. the body) is the only traced part, so the same composition with new
-    parameters or a new ``h`` reuses compiled code; ``flows`` and ``word`` are static.
+
+class Composition(AbstractFlow):
+    """A composed one-step map ``step(state, h)``; itself a flow (not a group), so it can
+    be a piece of another composition.
+
+    The flows are its PyTree children (their parameters are traced); ``word``, ``scheme``
+    and ``fsal`` are static.
     """
 
-    flows: tuple[Callable, ...]
-    word: Word
-    params: Any = None
-    scheme: Scheme | None = None
-    fsal: bool = False
+    flows: tuple[AbstractFlow, ...]
+    word: Word = eqx.field(static=True)
+    scheme: Scheme | None = eqx.field(static=True, default=None)
+    fsal: bool = eqx.field(static=True, default=False)
 
     def __call__(self, state, h):
-        return _apply(self.flows, self.params, self.word, state, _like_state(h, state))
+        return _apply(self.flows, self.word, state, _like_state(h, state))
+
+    @property
+    def is_group(self) -> bool:
+        return False
 
     def advance(self, state, h, n: int):
         """``n`` steps, merging the last sub-flow of each step with the first of the next."""
@@ -104,28 +111,19 @@ class Composition:
         joint = middle + ((piece, last + first),)
 
         def body(x, _):
-            return _apply(self.flows, self.params, joint, x, h), None
+            return _apply(self.flows, joint, x, h), None
 
-        state = _apply(self.flows, self.params, ((piece, first),), state, h)
+        state = _apply(self.flows, ((piece, first),), state, h)
         state = jax.lax.scan(body, state, length=n - 1)[0]
-        return _apply(self.flows, self.params, middle + ((piece, last),), state, h)
+        return _apply(self.flows, middle + ((piece, last),), state, h)
 
     @property
     def flows_per_step(self) -> int:
         """Sub-flows evaluated per step in a long run (after all merging)."""
         return len(self.word) - (1 if self.fsal else 0)
 
-    def tree_flatten(self):
-        return (self.params,), (self.flows, self.word, self.scheme, self.fsal)
 
-    @classmethod
-    def tree_unflatten(cls, aux, children):
-        flows, w, scheme, fsal = aux
-        return cls(flows, w, children[0], scheme, fsal)
-
-
-@jax.tree_util.register_pytree_node_class
-class RolledComposition:
+class RolledComposition(AbstractFlow):
     """The same map as a ``Composition``, its word run by ``lax.scan`` + ``lax.switch`` with
     the pieces and weights as traced arrays.
 
@@ -135,12 +133,13 @@ class RolledComposition:
     faster (no switch, merging across steps); prefer it for long integrations.
     """
 
-    def __init__(self, flows, pieces, weights, params):
-        self.flows, self.pieces, self.weights, self.params = tuple(flows), pieces, weights, params
+    flows: tuple[AbstractFlow, ...]
+    pieces: jax.Array
+    weights: jax.Array
 
     def __call__(self, state, h):
         h = _like_state(h, state)
-        branches = [functools.partial(_call_flow, f, self.params) for f in self.flows]
+        branches = [lambda x, t, f=f: f(x, t) for f in self.flows]
 
         def sub_flow(x, piece_weight):
             piece, weight = piece_weight
@@ -148,20 +147,15 @@ class RolledComposition:
 
         return jax.lax.scan(sub_flow, state, (self.pieces, self.weights))[0]
 
-    def tree_flatten(self):
-        return (self.pieces, self.weights, self.params), self.flows
-
-    @classmethod
-    def tree_unflatten(cls, flows, children):
-        return cls(flows, *children)
-
-
-def _call_flow(flow, params, state, t):
-    return flow(state, t, params)
+    @property
+    def is_group(self) -> bool:
+        return False
 
 
 def roll(composition: Composition, length: int | None = None) -> RolledComposition:
     """``composition`` as a ``RolledComposition``, padded to ``length`` sub-flows."""
+    if not isinstance(composition, Composition):
+        raise InputError(f"roll needs a Composition, got {type(composition).__name__}")
     w = tuple(composition.word)
     length = len(w) if length is None else int(length)
     if length < len(w):
@@ -169,26 +163,33 @@ def roll(composition: Composition, length: int | None = None) -> RolledCompositi
     padded = w + ((0, 0.0),) * (length - len(w))
     pieces = jnp.asarray(np.array([p for p, _ in padded], dtype=np.int32))
     weights = jnp.asarray(np.array([c for _, c in padded]))
-    return RolledComposition(composition.flows, pieces, weights, composition.params)
+    return RolledComposition(composition.flows, pieces, weights)
 
 
-def _like_state(h, state):
-    """The step size in the state's floating dtype (never the other way round)."""
-    dtype = jnp.result_type(*jax.tree_util.tree_leaves(state))
-    return jnp.asarray(h, dtype=dtype)
-
-
-def compose(flows: Sequence[Callable], scheme: "Scheme | str", params=None, *, merge_flows: bool = True
+def compose(flows: Sequence, scheme: "Scheme | str", params=None, *, merge_flows: bool | None = None
             ) -> Composition:
-    """Compose exact ``flows`` (``flow(state, t, params)``) by ``scheme`` into one step.
+    """Compose ``flows`` by ``scheme`` into one step.
 
-    ``merge_flows=False`` keeps every sub-flow of the scheme as written (for checking the
-    merging, which must agree to round-off).
+    ``flows`` are flow modules (``flow(state, t)``) or plain functions (``fn(state, t)``, or
+    ``fn(state, t, params)`` with ``params=``), each the time-t map of one piece.
+    ``merge_flows``: ``None`` (default) merges adjacent sub-flows of every exact group flow
+    and keeps the others apart; ``True`` asks to merge every piece (an error if one is not a
+    group); ``False`` keeps every sub-flow of the scheme as written (for checking the merging,
+    which must agree to round-off).
     """
     scheme = schemes.resolve(scheme)
-    flows = tuple(flows)
+    flows = tuple(as_flow(f, params) for f in flows)
+    if not flows:
+        raise InputError("compose needs at least one flow")
+    groups = [f.is_group for f in flows]
+    if merge_flows is True and not all(groups):
+        bad = [f"{k} ({type(f).__name__})" for k, f in enumerate(flows) if not f.is_group]
+        raise InputError(f"merge_flows=True merges every piece, but piece {', '.join(bad)} is not an exact "
+                         "one-parameter group (φ_s∘φ_t = φ_(s+t) fails); leave merge_flows=None")
+    if merge_flows not in (None, True, False):
+        raise InputError(f"merge_flows must be None, True or False, got {merge_flows!r}")
     w = word(scheme, len(flows))
-    if merge_flows:
-        w = merge(w)
-    fsal = merge_flows and len(w) >= 2 and w[0][0] == w[-1][0]
-    return Composition(flows, w, params, scheme, fsal)
+    if merge_flows is not False:
+        w = merge(w, groups)
+    fsal = merge_flows is not False and len(w) >= 2 and w[0][0] == w[-1][0] and groups[w[0][0]]
+    return Composition(flows, w, scheme, fsal)

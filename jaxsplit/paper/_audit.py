@@ -31,21 +31,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._body import PAPER_BODY, PAPER_M0, STANDARD_CASE, RigidBody
-from ._compose import roll
-from ._errors import InputError
-from ._exact import symmetric_solution
-from ._hamilton_poisson import (
-    canonical_system,
-    constant_poisson_system,
-    example_3_1,
-    harmonic_oscillator,
-    rigid_body_system,
-)
-from ._integrate import integrate
-from ._invariants import monitor_invariants
-from ._order import fit_order, global_errors, ladder
-from ._poisson_check import (
+from ..checks._invariants import monitor_invariants
+from ..checks._order import fit_order, global_errors, ladder
+from ..checks._poisson import (
     growth_exponent,
     kks_form,
     orbit_symplectic_defect,
@@ -53,18 +41,29 @@ from ._poisson_check import (
     random_unit_states,
     symplectic_defect,
 )
-from ._rotations import hat, rotation_matrix
-from ._runge_kutta import (
+from ..checks._tableau import condition_2_7_defect
+from ..classical._runge_kutta import (
     ButcherTableau,
-    Ruth,
     padded_coefficients,
     runge_kutta,
     runge_kutta_coefficients,
     tableaus,
 )
-from ._schemes import triple_jump
-from ._splitting import splitting
-from ._tableau_checks import condition_2_7_defect
+from ..classical._ruth import Ruth
+from ..core._compose import roll
+from ..core._errors import InputError
+from ..core._integrate import integrate
+from ..core._schemes import triple_jump
+from ..systems._hamilton_poisson import (
+    canonical_system,
+    constant_poisson_system,
+    example_3_1,
+    harmonic_oscillator,
+    rigid_body_system,
+)
+from ..systems._rigid_body import PAPER_BODY, PAPER_M0, STANDARD_CASE, RigidBody, symmetric_solution
+from ..systems._splitting import splitting
+from ..systems.so3 import hat, rotation_matrix
 
 VERDICTS = ("confirmed", "refuted", "corrected", "not-checkable")
 
@@ -942,12 +941,12 @@ def audit_paper(out_dir, claims=None, *, figures: bool = True, force: bool = Fal
     records.sort(key=lambda r: order[r["id"]])
     figure_files = {}
     if figures:
-        from ._audit_figures import make_figures
+        from ..paper._figures import make_figures
 
         figure_files = make_figures(ctx, out_dir)
     with open(os.path.join(out_dir, "claims.json"), "w", encoding="utf-8") as fh:
         json.dump(records, fh, indent=2, ensure_ascii=False)
-    from ._audit_figures import write_report
+    from ..paper._figures import write_report
 
     write_report(records, figure_files, timings, os.path.join(out_dir, "report.md"))
     return records

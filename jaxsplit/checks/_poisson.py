@@ -1,4 +1,4 @@
-"""Structure checks for ANY map on Rⁿ given as a pure function ``step(x, h)``.
+"""Structure checks for ANY map ``step(x, h)`` on any state, and for Poisson matrices.
 
 * Poisson (seed paper, Observation 3.1, (3.2)): Φ is Poisson for Π iff
   DΦ(x) Π(x) DΦ(x)ᵀ = Π(Φ(x)) for all x. ``poisson_defect`` returns the max-norm of the
@@ -10,6 +10,11 @@
   |ω_{Φ(m)}(DΦ u, DΦ v) − ω_m(u, v)| on an orthonormal tangent basis (u, v) at m, together
   with the Casimir change that decides whether Φ maps orbits to orbits at all.
 
+* Jacobi (of a Poisson matrix function itself): Π skew and the Jacobi identity's cyclic
+  sum zero; ``jacobi_defect`` checks a user's Π(x) with ∂Π from ``jax.jacfwd``.
+
+States may be any PyTree: the checks ravel the floating leaves into one vector
+(``jaxsplit.core.state.ravel``) and Π(x) is written in those coordinates.
 Every defect is a pure function of (x, h) and vmaps. ``defect_summary`` evaluates one
 over a sample of points and step sizes in one compiled call and reports the maximum and
 where it is attained; ``growth_exponent`` fits defect ∝ h^p.
@@ -22,30 +27,83 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._errors import InputError
+from ..core._errors import InputError
+from ..core._state import as_state, float_dtype, leading_size, ravel
 
 
 def _state(x):
-    x = jnp.asarray(x)
-    if not jnp.issubdtype(x.dtype, jnp.floating):
-        x = x.astype(jnp.result_type(float))
-    if x.ndim != 1:
-        raise InputError(f"the checks act on a single state x in R^n (vmap for many), got shape {x.shape}")
+    """A single state as a PyTree of arrays (vmap for many)."""
+    return as_state(x, "the state")
+
+
+def _vector(x):
+    x = _state(x)
+    if not (hasattr(x, "ndim") and x.ndim == 1):
+        raise InputError(f"this check acts on a single state x in R^n (vmap for many), got {type(x).__name__} "
+                         f"of shape {getattr(x, 'shape', None)}")
     return x
 
 
 def _map(step, x, h):
-    h = jnp.asarray(h, dtype=x.dtype)
     return lambda y: step(y, h)
 
 
+def _flat_map(step, x, h):
+    """(flat x, Φ on flat vectors, unravel) for a map of any PyTree state."""
+    flat, unravel = ravel(x)
+    h = jnp.asarray(h, dtype=flat.dtype)
+    return flat, (lambda v: ravel(step(unravel(v), h))[0]), unravel
+
+
+def _poisson_fn(poisson_matrix):
+    """A system (its ``poisson_matrix`` method) or a function x -> Π(x)."""
+    fn = getattr(poisson_matrix, "poisson_matrix", poisson_matrix)
+    if not callable(fn):
+        raise InputError(f"poisson_matrix must be a function x -> Π(x) or a system, got {poisson_matrix!r}")
+    return fn
+
+
+def _square(pi, n: int, where: str):
+    pi = jnp.asarray(pi)
+    if pi.shape != (n, n):
+        raise InputError(f"the checks act on a single state (vmap for many): Π(x) must be ({n}, {n}) over the "
+                         f"{n} floating components of the state (in ravel order), got shape {pi.shape} {where}")
+    return pi
+
+
 def poisson_defect(step: Callable, poisson_matrix: Callable, x, h):
-    """max |DΦ(x) Π(x) DΦ(x)ᵀ − Π(Φ(x))| for Φ = step(·, h)."""
+    """max |DΦ(x) Π(x) DΦ(x)ᵀ − Π(Φ(x))| for Φ = step(·, h), on any PyTree state.
+
+    ``poisson_matrix`` is a function x -> Π(x) ((n, n) over the n floating components of
+    the state in ravel order) or a system. DΦ by ``jax.jacfwd`` on the raveled floating
+    leaves; integer leaves ride along unchanged.
+    """
     x = _state(x)
-    phi = _map(step, x, h)
-    jac = jax.jacfwd(phi)(x)
-    lhs = jac @ poisson_matrix(x) @ jac.T
-    return jnp.max(jnp.abs(lhs - poisson_matrix(phi(x))))
+    pi = _poisson_fn(poisson_matrix)
+    flat, phi, unravel = _flat_map(step, x, h)
+    jac = jax.jacfwd(phi)(flat)
+    n = flat.shape[0]
+    lhs = jac @ _square(pi(x), n, "at x") @ jac.T
+    return jnp.max(jnp.abs(lhs - _square(pi(unravel(phi(flat))), n, "at Φ(x)")))
+
+
+def jacobi_defect(poisson_matrix: Callable, x):
+    """How far Π is from a Poisson structure at x: the max of |Π + Πᵀ| (skew symmetry) and
+    of the Jacobi identity's cyclic sum Σ_l Π_il ∂_l Π_jk + Π_jl ∂_l Π_ki + Π_kl ∂_l Π_ij,
+    with ∂Π by ``jax.jacfwd``; any PyTree state (floating leaves raveled)."""
+    x = _state(x)
+    pi = _poisson_fn(poisson_matrix)
+    flat, unravel = ravel(x)
+    n = flat.shape[0]
+
+    def matrix(v):
+        return _square(pi(unravel(v)), n, "")
+
+    p = matrix(flat)
+    dp = jax.jacfwd(matrix)(flat)  # dp[j, k, l] = ∂_l Π_jk
+    t = jnp.einsum("il,jkl->ijk", p, dp)
+    cyclic = t + jnp.transpose(t, (1, 2, 0)) + jnp.transpose(t, (2, 0, 1))
+    return jnp.maximum(jnp.max(jnp.abs(p + p.T)), jnp.max(jnp.abs(cyclic)))
 
 
 def canonical_j(dim: int, dtype=None):
@@ -58,7 +116,7 @@ def canonical_j(dim: int, dtype=None):
 
 def symplectic_defect(step: Callable, x, h, j=None):
     """max |DΦ(x)ᵀ J DΦ(x) − J|; J = [[0, I], [−I, 0]] for x = (q, p) unless given."""
-    x = _state(x)
+    x = _vector(x)
     j = canonical_j(x.shape[0], x.dtype) if j is None else jnp.asarray(j, dtype=x.dtype)
     if j.shape != (x.shape[0], x.shape[0]):
         raise InputError(f"J must be {x.shape[0]} x {x.shape[0]}, got shape {j.shape}")
@@ -82,7 +140,7 @@ def _tangent_basis(m):
 
 def orbit_symplectic_defect(step: Callable, m, h):
     """|ω_{Φ(m)}(DΦ u, DΦ v) − ω_m(u, v)| + ||Φ(m)|² − |m|²|/|m|² for a map of so(3)* = R³."""
-    m = _state(m)
+    m = _vector(m)
     if m.shape != (3,):
         raise InputError(f"coadjoint orbits of so(3)* need m in R^3, got shape {m.shape}")
     phi = _map(step, m, h)
@@ -98,7 +156,7 @@ class DefectSummary(NamedTuple):
     """A defect over a sample: its maximum and where it is attained."""
 
     max: float
-    x: np.ndarray  # the state of the worst sample
+    x: object  # the state of the worst sample (arrays, or a PyTree of arrays)
     h: float  # its step size
     index: int
     defects: np.ndarray  # every sample's defect
@@ -108,34 +166,46 @@ PoissonSummary = DefectSummary
 
 
 def _sample(xs, hs):
-    xs = jnp.asarray(xs)
-    if not jnp.issubdtype(xs.dtype, jnp.floating):
-        xs = xs.astype(jnp.result_type(float))
-    if xs.ndim != 2:
+    """States (a PyTree whose leaves share a leading axis N) and N step sizes (or a scalar)."""
+    xs = as_state(xs, "sample states")
+    n = leading_size(xs, "sample states")
+    if isinstance(xs, jax.Array) and xs.ndim < 2:
         raise InputError(f"sample states must have shape (N, n), got {xs.shape}")
-    hs = jnp.broadcast_to(jnp.asarray(hs, dtype=xs.dtype), xs.shape[:1]) if jnp.ndim(hs) == 0 else jnp.asarray(hs, xs.dtype)
-    if hs.shape != xs.shape[:1]:
-        raise InputError(f"need one step size per state ({xs.shape[0]}) or a scalar, got shape {hs.shape}")
+    dtype = float_dtype(xs)
+    hs = jnp.broadcast_to(jnp.asarray(hs, dtype=dtype), (n,)) if jnp.ndim(hs) == 0 else jnp.asarray(hs, dtype)
+    if hs.shape != (n,):
+        raise InputError(f"need one step size per state ({n}) or a scalar, got shape {hs.shape}")
     return xs, hs
 
 
+def _summary(values, xs, hs) -> DefectSummary:
+    values = np.asarray(values)
+    finite = np.isfinite(values)
+    k = int(np.nanargmax(values)) if finite.any() else 0
+    worst = float(np.nanmax(values)) if finite.any() else float("nan")
+    if np.any(np.isnan(values)):
+        worst, k = float("nan"), int(np.argmax(np.isnan(values)))
+    x = jax.tree_util.tree_map(lambda a: np.asarray(a[k]), xs)
+    return DefectSummary(worst, x, float(hs[k]), k, values)
+
+
 def defect_summary(defect: Callable, xs, hs) -> DefectSummary:
-    """Evaluate ``defect(x, h)`` over states ``xs`` (N, n) and step sizes ``hs`` (N,) or scalar.
+    """Evaluate ``defect(x, h)`` over states ``xs`` (N, ...) and step sizes ``hs`` (N,) or scalar.
 
     One compilation for the whole sample (``jit(vmap(defect))``).
     """
     xs, hs = _sample(xs, hs)
-    values = np.asarray(jax.jit(jax.vmap(defect))(xs, hs))
-    k = int(np.nanargmax(values)) if np.any(np.isfinite(values)) else 0
-    worst = float(np.nanmax(values)) if np.any(np.isfinite(values)) else float("nan")
-    if np.any(np.isnan(values)):
-        worst, k = float("nan"), int(np.argmax(np.isnan(values)))
-    return DefectSummary(worst, np.asarray(xs[k]), float(hs[k]), k, values)
+    return _summary(jax.jit(jax.vmap(defect))(xs, hs), xs, hs)
 
 
 def poisson_summary(step: Callable, poisson_matrix: Callable, xs, hs) -> DefectSummary:
     """``poisson_defect`` over a sample (maximum and where it is attained)."""
     return defect_summary(lambda x, h: poisson_defect(step, poisson_matrix, x, h), xs, hs)
+
+
+def jacobi_summary(poisson_matrix: Callable, xs) -> DefectSummary:
+    """``jacobi_defect`` over a sample of states (``h`` is reported as 0)."""
+    return defect_summary(lambda x, h: jacobi_defect(poisson_matrix, x), xs, 0.0)
 
 
 def symplectic_summary(step: Callable, xs, hs, j=None) -> DefectSummary:

@@ -21,8 +21,8 @@ midpoint = Gauss–Legendre 1 (2.2); Gauss–Legendre 2, 3 (and any s by colloca
 RK4; implicit Euler, Radau IIA (2 stages), Lobatto IIIA (3 stages); and a 2-stage DIRK
 (two implicit midpoint half steps) that satisfies (2.7) without being Gauss–Legendre.
 
-The Ruth integrator (2.6) of Example 2.1 is symplectic Euler for a separable H = T(p) + V(q):
-q_{n+1} = q_n + h ∇T(p_n), p_{n+1} = p_n − h ∇V(q_{n+1}).
+States may be any PyTree: the methods act on its floating leaves, raveled into one vector
+(``jaxsplit.core.state.ravel``), so they apply to every system of the system layer.
 """
 
 import dataclasses
@@ -30,12 +30,15 @@ import math
 from collections.abc import Callable
 from typing import NamedTuple
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._errors import InputError
-from ._tableau_checks import ORDER_TOL, order_conditions
+from ..checks._tableau import ORDER_TOL, order_conditions
+from ..core._errors import InputError
+from ..core._flows import AbstractFlow
+from ..core._state import as_state, ravel
 
 _ROW_SUM_TOL = 1e-14
 
@@ -162,6 +165,17 @@ def _field(system) -> Callable:
     raise InputError(f"system must have a vector_field(x) method or be a function f(x), got {type(system).__name__}")
 
 
+def _flat_problem(system, x):
+    """(x as a flat vector, the field on flat vectors, unravel): RK acts on any PyTree state."""
+    f = _field(system)
+    flat, unravel = ravel(as_state(x, "x"))
+
+    def flat_field(v):
+        return ravel(f(unravel(v)))[0]
+
+    return flat, flat_field, unravel
+
+
 class NewtonInfo(NamedTuple):
     """Diagnostics of one stage solve: Newton iterations, max|G(K)|, last max|ΔK|."""
 
@@ -195,77 +209,72 @@ def _tangent_solve(g, y):
     return jnp.linalg.solve(jax.jacfwd(g)(y), y)
 
 
-@jax.tree_util.register_pytree_node_class
-@dataclasses.dataclass(frozen=True)
-class RungeKutta:
-    """One step ``step(x, h)`` of the tableau on ``system`` (a PyTree: parameters trace)."""
+def _stage_residual(f, x, h, a, s):
+    n = x.shape[0]
+
+    def g(z):
+        k = z.reshape(s, n)
+        return (k - jax.vmap(f)(x[None, :] + h * (a @ k))).reshape(-1)
+
+    return g
+
+
+def _solve_stages(g, z0, max_iter):
+    return jax.lax.custom_root(g, z0, lambda g_, z_: _newton(g_, z_, max_iter)[0], _tangent_solve)
+
+
+class RungeKutta(AbstractFlow):
+    """One step ``step(x, h)`` of the tableau on ``system`` (a module: its parameters trace).
+
+    Acts on any PyTree state (on its floating leaves, raveled). A flow in the composer's
+    sense, but not an exact one-parameter group: it is never merged.
+    """
 
     system: object
-    tableau: ButcherTableau
-    max_iter: int = 50
+    tableau: ButcherTableau = eqx.field(static=True)
+    max_iter: int = eqx.field(static=True, default=50)
 
-    def _setup(self, x, h):
-        if not hasattr(x, "ndim") or x.ndim != 1:
-            raise InputError(f"Runge-Kutta states must be vectors in R^n, got shape {getattr(x, 'shape', None)}")
-        dtype = x.dtype
+    @property
+    def is_group(self) -> bool:
+        return False
+
+    def _stages(self, flat, f, h):
+        dtype = flat.dtype
         a = jnp.asarray(self.tableau.a, dtype=dtype)
-        b = jnp.asarray(self.tableau.b, dtype=dtype)
-        return a, b, jnp.asarray(h, dtype=dtype)
-
-    def _residual(self, x, h, a):
-        f = _field(self.system)
-        s, n = self.tableau.stages, x.shape[0]
-
-        def g(z):
-            k = z.reshape(s, n)
-            stages = x[None, :] + h * (a @ k)
-            return (k - jax.vmap(f)(stages)).reshape(-1)
-
-        return g
-
-    def stage_derivatives(self, x, h):
-        """The K_i (shape (s, n)) of one step from ``x``."""
-        x = jnp.asarray(x)
-        a, _, h = self._setup(x, h)
-        f = _field(self.system)
-        s, n = self.tableau.stages, x.shape[0]
+        s = self.tableau.stages
         if self.tableau.explicit:
             ks = []
             for i in range(s):
-                y = x
+                y = flat
                 for j in range(i):
                     if self.tableau.a[i][j] != 0.0:
                         y = y + (h * a[i, j]) * ks[j]
                 ks.append(f(y))
             return jnp.stack(ks)
-        g = self._residual(x, h, a)
-        z0 = jnp.tile(f(x), s)
-        z = jax.lax.custom_root(g, z0, lambda g_, z_: _newton(g_, z_, self.max_iter)[0], _tangent_solve)
-        return z.reshape(s, n)
+        g = _stage_residual(f, flat, h, a, s)
+        return _solve_stages(g, jnp.tile(f(flat), s), self.max_iter).reshape(s, -1)
+
+    def stage_derivatives(self, x, h):
+        """The K_i (shape (s, n), n the number of floating components) of one step from ``x``."""
+        flat, f, _ = _flat_problem(self.system, x)
+        return self._stages(flat, f, jnp.asarray(h, dtype=flat.dtype))
 
     def newton_info(self, x, h) -> NewtonInfo:
         """Iterations, final residual max|G(K)| and last increment of the stage solve."""
-        x = jnp.asarray(x)
-        a, _, h = self._setup(x, h)
-        g = self._residual(x, h, a)
+        flat, f, _ = _flat_problem(self.system, x)
+        h = jnp.asarray(h, dtype=flat.dtype)
+        g = _stage_residual(f, flat, h, jnp.asarray(self.tableau.a, dtype=flat.dtype), self.tableau.stages)
         if self.tableau.explicit:
-            z = self.stage_derivatives(x, h).reshape(-1)
-            return NewtonInfo(jnp.asarray(0), jnp.max(jnp.abs(g(z))), jnp.asarray(0.0, x.dtype))
-        z, it, dz = _newton(g, jnp.tile(_field(self.system)(x), self.tableau.stages), self.max_iter)
+            z = self._stages(flat, f, h).reshape(-1)
+            return NewtonInfo(jnp.asarray(0), jnp.max(jnp.abs(g(z))), jnp.asarray(0.0, flat.dtype))
+        z, it, dz = _newton(g, jnp.tile(f(flat), self.tableau.stages), self.max_iter)
         return NewtonInfo(it, jnp.max(jnp.abs(g(z))), dz)
 
     def __call__(self, x, h):
-        x = jnp.asarray(x)
-        _, b, h = self._setup(x, h)
-        k = self.stage_derivatives(x, h)
-        return x + h * (b @ k)
-
-    def tree_flatten(self):
-        return (self.system,), (self.tableau, self.max_iter)
-
-    @classmethod
-    def tree_unflatten(cls, aux, children):
-        return cls(children[0], *aux)
+        flat, f, unravel = _flat_problem(self.system, x)
+        h = jnp.asarray(h, dtype=flat.dtype)
+        k = self._stages(flat, f, h)
+        return unravel(flat + h * (jnp.asarray(self.tableau.b, dtype=flat.dtype) @ k))
 
 
 def runge_kutta(system, tableau: "ButcherTableau | str", *, max_iter: int = 50) -> RungeKutta:
@@ -283,10 +292,8 @@ def runge_kutta(system, tableau: "ButcherTableau | str", *, max_iter: int = 50) 
     return RungeKutta(system, tableau, max_iter)
 
 
-@jax.tree_util.register_pytree_node_class
-@dataclasses.dataclass(frozen=True)
-class CoefficientRungeKutta:
-    """A Runge–Kutta step whose coefficients (A, b) are ARRAYS (PyTree leaves), not static data.
+class CoefficientRungeKutta(AbstractFlow):
+    """A Runge–Kutta step whose coefficients (A, b) are ARRAYS (traced), not static data.
 
     Every tableau, explicit or not, is solved by the same Newton iteration (for a strictly
     lower-triangular A it terminates in at most s iterations), so one compilation serves a
@@ -297,31 +304,19 @@ class CoefficientRungeKutta:
     system: object
     a: jax.Array
     b: jax.Array
-    max_iter: int = 50
+    max_iter: int = eqx.field(static=True, default=50)
+
+    @property
+    def is_group(self) -> bool:
+        return False
 
     def __call__(self, x, h):
-        x = jnp.asarray(x)
-        if x.ndim != 1:
-            raise InputError(f"Runge-Kutta states must be vectors in R^n, got shape {x.shape}")
-        h = jnp.asarray(h, dtype=x.dtype)
-        a, b = jnp.asarray(self.a, dtype=x.dtype), jnp.asarray(self.b, dtype=x.dtype)
-        f = _field(self.system)
-        s, n = b.shape[0], x.shape[0]
-
-        def g(z):
-            k = z.reshape(s, n)
-            return (k - jax.vmap(f)(x[None, :] + h * (a @ k))).reshape(-1)
-
-        z = jax.lax.custom_root(g, jnp.tile(f(x), s), lambda g_, z_: _newton(g_, z_, self.max_iter)[0],
-                                _tangent_solve)
-        return x + h * (b @ z.reshape(s, n))
-
-    def tree_flatten(self):
-        return (self.system, self.a, self.b), (self.max_iter,)
-
-    @classmethod
-    def tree_unflatten(cls, aux, children):
-        return cls(*children, *aux)
+        flat, f, unravel = _flat_problem(self.system, x)
+        h = jnp.asarray(h, dtype=flat.dtype)
+        a, b = jnp.asarray(self.a, dtype=flat.dtype), jnp.asarray(self.b, dtype=flat.dtype)
+        s = b.shape[0]
+        z = _solve_stages(_stage_residual(f, flat, h, a, s), jnp.tile(f(flat), s), self.max_iter)
+        return unravel(flat + h * (b @ z.reshape(s, -1)))
 
 
 def runge_kutta_coefficients(system, a, b, *, max_iter: int = 50) -> CoefficientRungeKutta:
@@ -363,38 +358,3 @@ def gauss_legendre(system, stages: int = 1) -> RungeKutta:
 def rk4(system) -> RungeKutta:
     """The classical fourth-order Runge–Kutta method."""
     return runge_kutta(system, "rk4")
-
-
-# ------------------------------------------------------------------ Ruth (2.6)
-def _half_square(v):
-    return 0.5 * jnp.sum(v * v)
-
-
-@dataclasses.dataclass(frozen=True)
-class Ruth:
-    """Ruth's first-order symplectic map (2.6) for H = T(p) + V(q), state x = (q, p).
-
-    q_{n+1} = q_n + h ∇T(p_n),  p_{n+1} = p_n − h ∇V(q_{n+1}). With T = V = ½|·|² this is
-    exactly (2.6): x¹ ← x¹ + h x², x² ← −h x¹ + (1 − h²) x².
-    """
-
-    potential: Callable = _half_square
-    kinetic: Callable = _half_square
-
-    def __call__(self, x, h):
-        x = jnp.asarray(x)
-        if x.ndim != 1 or x.shape[0] % 2:
-            raise InputError(f"the Ruth map acts on x = (q, p) of even length, got shape {x.shape}")
-        h = jnp.asarray(h, dtype=x.dtype)
-        m = x.shape[0] // 2
-        q, p = x[:m], x[m:]
-        q = q + h * jax.grad(self.kinetic)(p)
-        p = p - h * jax.grad(self.potential)(q)
-        return jnp.concatenate([q, p])
-
-
-def ruth(potential: Callable = _half_square, kinetic: Callable = _half_square) -> Ruth:
-    """The Ruth integrator (2.6); defaults give Example 2.1's harmonic oscillator."""
-    if not callable(potential) or not callable(kinetic):
-        raise InputError("ruth needs callables potential(q) and kinetic(p)")
-    return Ruth(potential, kinetic)

@@ -15,8 +15,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._errors import InputError
-from ._integrate import integrate
+from ..core._errors import InputError
+from ..core._integrate import integrate
+from ..core._state import as_state, float_dtype, is_floating
 
 ORDER_WINDOW = (1e-13, 1e-4)  # ~10x the float64 round-off floor seen at T = 10 (1e-14)
 
@@ -50,13 +51,15 @@ def global_errors(step, x0, t_end: float, counts, reference):
     counts = np.asarray(sorted(int(n) for n in counts))
     if counts[0] < 1:
         raise InputError(f"step counts must be >= 1, got {counts.tolist()}")
-    dtype = jnp.result_type(*jax.tree_util.tree_leaves(x0))
-    hs = jnp.asarray(t_end / counts, dtype=dtype)
+    x0 = as_state(x0)
+    hs = jnp.asarray(t_end / counts, dtype=float_dtype(x0))
     saved = jax.vmap(lambda h: integrate(step, x0, h, int(counts[-1]), save_every=1).x)(hs)
     rows = jnp.arange(len(counts))
     finals = jax.tree_util.tree_map(lambda a: a[rows, counts], saved)
     diffs = jax.tree_util.tree_map(lambda a, r: jnp.abs(a - r).reshape(len(counts), -1), finals, reference)
-    errors = jnp.max(jnp.concatenate(jax.tree_util.tree_leaves(diffs), axis=1), axis=1)
+    floating = [d for d, a in zip(jax.tree_util.tree_leaves(diffs), jax.tree_util.tree_leaves(finals))
+                if is_floating(a)]  # integer leaves ride along: not errors
+    errors = jnp.max(jnp.concatenate(floating, axis=1), axis=1)
     return np.asarray(hs), np.asarray(errors)
 
 
@@ -67,7 +70,7 @@ def ladder(start: int, factor: float = 16.0, points: int = 12):
 
 def estimate_order(step, x0, t_end: float, counts, reference=None, *, reference_step=None,
                    reference_count: int | None = None, window=ORDER_WINDOW) -> OrderFit:
-    """Empirical order of ``step`` at ``t_end`` over the step-count ladder ``counts``.
+    """Empirical order of ``step`` at ``t_end`` over the step-count ladder ``counts`` (any PyTree state).
 
     ``reference`` is the exact state at ``t_end`` (an array or PyTree), or a callable
     ``reference(t_end)`` (an exact solution), or ``None``: then a tight reference
@@ -82,8 +85,8 @@ def estimate_order(step, x0, t_end: float, counts, reference=None, *, reference_
         n_ref = 16 * max(int(n) for n in counts) if reference_count is None else int(reference_count)
         if n_ref < 1:
             raise InputError(f"reference_count must be >= 1, got {reference_count!r}")
-        dtype = jnp.result_type(*jax.tree_util.tree_leaves(x0))
-        reference = integrate(reference_step, x0, jnp.asarray(t_end / n_ref, dtype=dtype), n_ref)
+        x0 = as_state(x0)
+        reference = integrate(reference_step, x0, jnp.asarray(t_end / n_ref, dtype=float_dtype(x0)), n_ref)
     elif callable(reference):
         reference = reference(t_end)
     hs, errors = global_errors(step, x0, t_end, counts, reference)

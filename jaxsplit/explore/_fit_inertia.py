@@ -1,4 +1,4 @@
-"""Fitting a body to an observed trajectory, and gradients through long horizons.
+"""Fitting a free rigid body's inertia to an observed m(t): identifiability and the gauge.
 
 What m(t) can tell (identifiability)
 ------------------------------------
@@ -31,11 +31,8 @@ Uncertainty: the Gauss–Newton covariance σ̂² (JᵀJ)⁻¹ of stage 1 (σ̂�
 propagated to the ratios with the Jacobian of the gauge map (delta method), the energy's
 variance included.
 
-Long horizons: ``integrate_checkpointed`` runs blocks of steps under ``jax.checkpoint``,
-so reverse mode stores one state per block plus one block of residuals during the
-backward pass: memory O(n/B + B), O(√n) with the default B = ⌈√n⌉ (measured by
-``benchmarks/memory_checkpoint.py``). The trajectory fit checkpoints each interval between
-observations the same way.
+The optimisation, the checkpointed model and the Gauss–Newton curvature are the generic
+ones of ``jaxsplit.explore.fit`` (any system); this module adds the rigid body's gauge.
 """
 
 import functools
@@ -47,37 +44,11 @@ import jax
 import jax.flatten_util
 import jax.numpy as jnp
 import numpy as np
-import optax
 
-from ._body import RigidBody
-from ._compose import roll
-from ._errors import InputError
-from ._integrate import _advance
-from ._schemes import schemes
-from ._splitting import splitting
-
-
-# ------------------------------------------------------------------ long horizons
-def integrate_checkpointed(step, x0, h, n_steps: int, *, block: int | None = None):
-    """Final state after ``n_steps`` steps, for reverse-mode gradients with O(n/B + B) memory.
-
-    The steps run as ⌊n/B⌋ blocks of B (default ⌈√n⌉) under ``jax.checkpoint`` plus the
-    remainder; the forward values are those of ``integrate`` (same merged sub-flows).
-    Not jitted: call it inside your own ``jit``/``grad``.
-    """
-    if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)) or n_steps < 0:
-        raise InputError(f"n_steps must be an integer >= 0, got {n_steps!r}")
-    n_steps = int(n_steps)
-    if block is None:
-        block = max(1, math.isqrt(max(n_steps, 1)))
-    if isinstance(block, bool) or not isinstance(block, (int, np.integer)) or block < 1:
-        raise InputError(f"block must be an integer >= 1, got {block!r}")
-    dtype = jnp.result_type(*jax.tree_util.tree_leaves(x0))
-    h = jnp.asarray(h, dtype=dtype)
-    blocks, rest = divmod(n_steps, int(block))
-    run_block = jax.checkpoint(lambda x: _advance(step, x, h, int(block)))
-    x = jax.lax.scan(lambda y, _: (run_block(y), None), x0, length=blocks)[0] if blocks else x0
-    return _advance(step, x, h, rest) if rest else x
+from ..core._errors import InputError
+from ..core._schemes import schemes
+from ..systems._rigid_body import RigidBody
+from ._fit import adam, lbfgs, predict
 
 
 # ------------------------------------------------------------------ data checks
@@ -116,17 +87,14 @@ def integral_matching(t, m) -> np.ndarray:
     return w
 
 
+def _body(log_inertia):
+    return RigidBody(jnp.exp(log_inertia))
+
+
 def _predict(scheme, shift, n_sub: int, log_inertia, m0, dts):
-    """m at every observation time: one checkpointed block of ``n_sub`` steps per interval."""
-    step = roll(splitting(RigidBody(jnp.exp(log_inertia)), scheme, "casimir", shift_axis=shift))
-
-    @jax.checkpoint
-    def interval(m, dt):
-        h = dt / n_sub
-        m = jax.lax.fori_loop(0, n_sub, lambda _, y: step(y, h), m)
-        return m, m
-
-    return jnp.concatenate([m0[None], jax.lax.scan(interval, m0, dts)[1]])
+    """m at every observation time (the generic ``fit.predict`` on the Casimir split)."""
+    return predict(_body, log_inertia, m0, dts, scheme=scheme, split="casimir", options=(("shift", shift),),
+                   n_sub=n_sub)
 
 
 _predict_jit = jax.jit(_predict, static_argnums=(0, 1, 2))
@@ -156,39 +124,6 @@ class FitResult(NamedTuple):
         for k, v in self._asdict().items():
             out[k] = v.tolist() if isinstance(v, np.ndarray) else v
         return out
-
-
-def _lbfgs(fun, params, max_iter: int, tol: float):
-    """optax L-BFGS with its zoom line search, as one ``lax.while_loop``."""
-    opt = optax.lbfgs()
-    value_and_grad = optax.value_and_grad_from_state(fun)
-
-    def body(carry):
-        p, state, k = carry
-        value, grad = value_and_grad(p, state=state)
-        updates, state = opt.update(grad, state, p, value=value, grad=grad, value_fn=fun)
-        return optax.apply_updates(p, updates), state, k + 1
-
-    def cond(carry):
-        _, state, k = carry
-        grad = optax.tree_utils.tree_get(state, "grad")
-        gnorm = optax.tree_utils.tree_norm(grad)
-        return (k == 0) | ((k < max_iter) & (gnorm >= tol))
-
-    p, _, k = jax.lax.while_loop(cond, body, (params, opt.init(params), 0))
-    return p, k
-
-
-def _adam(fun, params, steps: int, lr: float):
-    opt = optax.adam(lr)
-
-    def body(carry, _):
-        p, state = carry
-        grad = jax.grad(fun)(p)
-        updates, state = opt.update(grad, state, p)
-        return (optax.apply_updates(p, updates), state), None
-
-    return jax.lax.scan(body, (params, opt.init(params)), length=steps)[0][0] if steps else params
 
 
 def _gauge_shift(w, m0, energy, inertia1):
@@ -224,8 +159,8 @@ def _optimise(params, obs, dts, log_i1, config):
         r = residuals(p)
         return jnp.mean(r * r)
 
-    params = _adam(loss, params, adam_steps, adam_lr)
-    params, k = _lbfgs(loss, params, lbfgs_iter, tol)
+    params = adam(loss, params, adam_steps, adam_lr)
+    params, k = lbfgs(loss, params, lbfgs_iter, tol)
     return params, k, loss(params)
 
 
@@ -279,7 +214,7 @@ def fit_inertia(t, m, *, energy: float | None = None, energy_sigma: float = 0.0,
     w0 = integral_matching(t, m)
     spread = max(float(np.ptp(w0)), 1e-8 * float(np.max(np.abs(w0))), 1e-300)
     w_ref = w0 - w0.min() + spread
-    shift = int(np.argsort(w_ref, kind="stable")[1]) + 1
+    shift = int(np.argsort(w_ref, kind="stable")[1])
     dtype = jnp.result_type(float)
     dts = jnp.asarray(np.diff(t), dtype)
     n_sub = max(1, math.ceil(float(np.max(np.diff(t))) / max_step))
@@ -351,7 +286,7 @@ def simulate_observations(inertia, m0, t, noise: float, *, seed: int = 0, scheme
     inertia = np.asarray(inertia, dtype=float)
     dtype = jnp.result_type(float)
     n_sub = max(1, math.ceil(float(np.max(np.diff(t))) / max_step))
-    shift = int(np.argsort(1 / inertia, kind="stable")[1]) + 1
+    shift = int(np.argsort(1 / inertia, kind="stable")[1])
     clean = _predict_jit(schemes.resolve(scheme), shift, n_sub, jnp.log(jnp.asarray(inertia, dtype)),
                          jnp.asarray(m0, dtype), jnp.asarray(np.diff(t), dtype))
     rng = np.random.default_rng(seed)

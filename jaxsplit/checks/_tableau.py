@@ -19,7 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._errors import InputError
+from ..core._errors import InputError
 
 CONDITION_TOL = 1e-14  # coefficients are given to ~16 digits
 ORDER_TOL = 1e-13

@@ -1,0 +1,97 @@
+"""The flow abstraction: the time-t map of one piece of a splitting, as a PyTree module.
+
+A flow is an ``equinox.Module`` called as ``flow(state, t)``. Its array fields are its
+parameters: traced wherever they sit (a new value reuses compiled code, ``vmap`` sweeps it,
+``grad`` differentiates it); structural choices (an axis index, a state layout) are static
+fields. ``is_group`` says whether the flow is an exact one-parameter group,
+φ_s ∘ φ_t = φ_{s+t}: only such flows may be merged by the composer. A ``Composition`` is a
+flow too (not a group), so compositions nest.
+"""
+
+import abc
+from collections.abc import Callable
+from typing import Any
+
+import equinox as eqx
+import jax
+
+
+class AbstractFlow(eqx.Module):
+    """``flow(state, t) -> state``: the time-``t`` map of one piece."""
+
+    @abc.abstractmethod
+    def __call__(self, state, t):
+        raise NotImplementedError
+
+    # ``jax.jit(step)`` hashes and compares the function: arrays count by identity (a module
+    # holding arrays is otherwise unhashable, and comparing array values inside a trace fails).
+    # A partitioned module (``eqx.filter_jit``'s static half, arrays replaced by None) hashes
+    # and compares by structure, as equinox does.
+    def _identity_key(self):
+        leaves, treedef = jax.tree_util.tree_flatten(self)
+        return treedef, tuple(("array", id(leaf)) if eqx.is_array(leaf) else leaf for leaf in leaves)
+
+    def __hash__(self):
+        return hash(self._identity_key())
+
+    def __eq__(self, other):
+        return type(self) is type(other) and self._identity_key() == other._identity_key()
+
+    @property
+    def is_group(self) -> bool:
+        """An exact one-parameter group (adjacent sub-flows may merge). Default: yes."""
+        return True
+
+
+class FunctionFlow(AbstractFlow):
+    """A plain function ``fn(state, t)`` (or ``fn(state, t, params)`` with ``params``) as a
+    flow. ``params`` is a PyTree of parameters (traced); ``group=False`` declares a map that
+    is not an exact one-parameter group (then it is never merged)."""
+
+    fn: Callable = eqx.field(static=True)
+    params: Any = None
+    group: bool = eqx.field(static=True, default=True)
+    with_params: bool = eqx.field(static=True, default=False)
+
+    def __call__(self, state, t):
+        return self.fn(state, t, self.params) if self.with_params else self.fn(state, t)
+
+    @property
+    def is_group(self) -> bool:
+        return self.group
+
+
+class Substeps(AbstractFlow):
+    """``flow`` applied ``n`` times with step t/n: sub-stepping a stiff or inexact piece
+    (for an exact group flow this changes nothing, so it is refused)."""
+
+    flow: AbstractFlow
+    n: int = eqx.field(static=True)
+
+    def __check_init__(self):
+        from ._errors import InputError
+
+        if isinstance(self.n, bool) or not isinstance(self.n, int) or self.n < 1:
+            raise InputError(f"Substeps needs an integer n >= 1, got {self.n!r}")
+
+    def __call__(self, state, t):
+        return jax.lax.fori_loop(0, self.n, lambda _, x: self.flow(x, t / self.n), state)
+
+    @property
+    def is_group(self) -> bool:
+        return False
+
+
+def as_flow(flow, params=None) -> AbstractFlow:
+    """A flow module from a module, or from a function ``fn(state, t[, params])``."""
+    if isinstance(flow, AbstractFlow):
+        if params is not None:
+            from ._errors import InputError
+
+            raise InputError("params= applies to plain-function flows; a flow module carries its own parameters")
+        return flow
+    if not callable(flow):
+        from ._errors import InputError
+
+        raise InputError(f"a flow must be callable as flow(state, t), got {flow!r}")
+    return FunctionFlow(flow, params, with_params=params is not None)

@@ -1,0 +1,69 @@
+"""States are any PyTree: the floating leaves evolve, integer leaves ride along untouched.
+
+``float_dtype`` is the dtype a computation on a state follows (the step size is cast to
+it, never the state to the step size). ``ravel`` flattens the floating leaves into one
+vector, the coordinates in which the structure checks take Jacobians and a system's
+Poisson matrix is written, and rebuilds the state around the untouched integer leaves.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.flatten_util import ravel_pytree
+
+from ._errors import InputError
+
+
+def is_floating(leaf) -> bool:
+    return jnp.issubdtype(jnp.result_type(leaf), jnp.floating)
+
+
+def float_dtype(state):
+    """The common dtype of the floating leaves (the default float when there are none)."""
+    leaves = [leaf for leaf in jax.tree_util.tree_leaves(state) if is_floating(leaf)]
+    return jnp.result_type(*leaves) if leaves else jnp.result_type(float)
+
+
+def as_state(x0, name: str = "x0"):
+    """Leaves as arrays. A state whose leaves are all integers (``m0 = [1, 0, 0]``) is
+    promoted to the default float dtype; in a state with floating leaves, integer leaves
+    stay integers. Complex, boolean, empty and non-numeric states are refused."""
+    leaves, treedef = jax.tree_util.tree_flatten(x0)
+    if not leaves:
+        raise InputError(f"{name} must hold at least one array, got {x0!r}")
+    arrays = []
+    for leaf in leaves:
+        try:
+            arr = jnp.asarray(leaf)
+        except (TypeError, ValueError) as err:
+            raise InputError(f"{name} must be numeric arrays, got {type(leaf).__name__} {leaf!r}") from err
+        if jnp.issubdtype(arr.dtype, jnp.complexfloating):
+            raise InputError(f"{name} must be real, got dtype {arr.dtype}")
+        if not (jnp.issubdtype(arr.dtype, jnp.floating) or jnp.issubdtype(arr.dtype, jnp.integer)):
+            raise InputError(f"{name} must be real numbers, got dtype {arr.dtype}")
+        arrays.append(arr)
+    if not any(jnp.issubdtype(a.dtype, jnp.floating) for a in arrays):
+        arrays = [a.astype(jnp.result_type(float)) for a in arrays]
+    return jax.tree_util.tree_unflatten(treedef, arrays)
+
+
+def ravel(state):
+    """(flat vector of the floating leaves, unravel) with ``unravel(v)`` the state whose
+    floating leaves are read from ``v`` and whose integer leaves are those of ``state``."""
+    leaves, treedef = jax.tree_util.tree_flatten(state)
+    floating = [is_floating(leaf) for leaf in leaves]
+    flat, unravel_floats = ravel_pytree([leaf for leaf, f in zip(leaves, floating) if f])
+
+    def unravel(v):
+        it = iter(unravel_floats(v))
+        return jax.tree_util.tree_unflatten(treedef, [next(it) if f else leaf for leaf, f in zip(leaves, floating)])
+
+    return flat, unravel
+
+
+def leading_size(tree, name: str) -> int:
+    """The common leading-axis length of every leaf (a batch or a trajectory)."""
+    sizes = {int(np.shape(leaf)[0]) if np.ndim(leaf) else -1 for leaf in jax.tree_util.tree_leaves(tree)}
+    if len(sizes) != 1 or -1 in sizes:
+        raise InputError(f"every leaf of {name} needs the same leading axis, got leading sizes {sorted(sizes)}")
+    return sizes.pop()
