@@ -4,12 +4,12 @@ Nothing here is library code: ``ScalarRotation`` and ``Barrier`` are the benchma
 demonstrations of the speed-ups suggested in ``benchmarks/README.md``.
 """
 
-import dataclasses
 import os
 import platform
 import statistics
 import time
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -81,69 +81,62 @@ def git_state() -> str:
     return head + (f" + uncommitted changes in {', '.join(dirty)}" if dirty else "")
 
 
-class MatrixRotation(jaxsplit.AxisRotation):
+class _RotationVariant(jaxsplit.AbstractFlow):
+    """A rotation about body ``axis`` by θ = rate·m_k·t in a pinned arithmetic form (so the
+    benchmark does not move with the library)."""
+
+    axis: int = eqx.field(static=True)
+    rate: jax.Array
+
+    def angle(self, m, t):
+        return self.rate.astype(m.dtype) * m[self.axis] * t
+
+
+class MatrixRotation(_RotationVariant):
     """The rotation as a 3x3 matrix product (``rotation_matrix(axis, angle) @ m``), as
-    ``AxisRotation`` computes it at commit 7b2b6c7, whatever the working tree holds."""
+    ``AxisRotation`` computed it at commit 7b2b6c7."""
 
-    def __call__(self, m, t, body):
-        angle = self.rate(body, m.dtype) * m[self.axis] * t
-        return jaxsplit.rotation_matrix(self.axis, angle) @ m
+    def __call__(self, m, t):
+        return jaxsplit.rotation_matrix(self.axis, self.angle(m, t)) @ m
 
 
-class ScalarRotation(jaxsplit.AxisRotation):
-    """jaxsplit's AxisRotation with the 3x3 matrix replaced by a two-component update."""
+class ScalarRotation(_RotationVariant):
+    """The two-component update, stacked."""
 
-    def __call__(self, m, t, body):
+    def __call__(self, m, t):
         k = self.axis
         i, j = (k + 1) % 3, (k + 2) % 3
-        theta = self.rate(body, m.dtype) * m[k] * t
+        theta = self.angle(m, t)
         c, s = jnp.cos(theta), jnp.sin(theta)
         out = [None] * 3
         out[k], out[i], out[j] = m[k], c * m[i] + s * m[j], -s * m[i] + c * m[j]
         return jnp.stack(out)
 
 
-class CorrectionRotation(jaxsplit.AxisRotation):
-    """The rotation as a correction in its plane, m + e_i((c−1)m_i + s m_j) + e_j((c−1)m_j − s m_i):
-    the form the working tree's ``_rotations.rotate`` had at 20:50 UTC on 2026-11-21 (a
-    candidate under test, copied here so the benchmark does not move with the tree)."""
+class CorrectionRotation(_RotationVariant):
+    """The rotation as a correction in its plane, m + e_i((c−1)m_i + s m_j) + e_j((c−1)m_j − s m_i)
+    (a candidate studied on 2026-11-21)."""
 
-    def __call__(self, m, t, body):
+    def __call__(self, m, t):
         k = self.axis
         i, j = (k + 1) % 3, (k + 2) % 3
-        theta = self.rate(body, m.dtype) * m[k] * t
+        theta = self.angle(m, t)
         c, s = jnp.cos(theta), jnp.sin(theta)
         e_i, e_j = (jnp.asarray(np.eye(3)[q], dtype=m.dtype) for q in (i, j))
         return m + e_i * ((c - 1) * m[i] + s * m[j]) + e_j * ((c - 1) * m[j] - s * m[i])
 
 
-@dataclasses.dataclass(frozen=True)
-class Barrier:
-    """A flow whose output is materialised (``lax.optimization_barrier``): stops XLA from
-    fusing a whole composition into one elementwise kernel that recomputes every earlier
-    sub-flow for each output component."""
-
-    flow: object
-
-    def __call__(self, m, t, params):
-        return jax.lax.optimization_barrier(self.flow(m, t, params))
+_VARIANTS = {"matrix": MatrixRotation, "scalar": ScalarRotation, "correction": CorrectionRotation}
 
 
-def step_variant(body, scheme: str, split: str, variant: str, shift_axis=2):
-    """A jaxsplit step: ``library`` (``jaxsplit.splitting`` as the working tree has it),
-    ``matrix`` (3x3-matrix flows), ``scalar`` (two-component flows, stacked),
-    ``correction`` (see ``CorrectionRotation``), each optionally
-    ``+barrier`` (every flow behind an optimization barrier); all but ``library`` go
-    through the library's generic composer ``jaxsplit.compose``."""
+def step_variant(body, scheme: str, split: str, variant: str, shift=1):
+    """A jaxsplit step: ``library`` (``jaxsplit.splitting`` as the working tree has it) or
+    the library's generic composer over flows of a pinned rotation form (``matrix``,
+    ``scalar``, ``correction``; the composer puts an optimization barrier on every
+    sub-flow, so ``+barrier`` names the same step)."""
+    options = {"shift": shift} if split == "casimir" else {}
     if variant == "library":
-        return jaxsplit.splitting(body, scheme, split, shift_axis=shift_axis)
-    flows = jaxsplit.rigid_body_flows(body, split, shift_axis)
-    if variant.startswith("scalar"):
-        flows = tuple(ScalarRotation(f.axis, f.shift) for f in flows)
-    elif variant.startswith("correction"):
-        flows = tuple(CorrectionRotation(f.axis, f.shift) for f in flows)
-    elif variant.startswith("matrix"):
-        flows = tuple(MatrixRotation(f.axis, f.shift) for f in flows)
-    if variant.endswith("barrier"):
-        flows = tuple(Barrier(f) for f in flows)
-    return jaxsplit.compose(flows, scheme, body)
+        return jaxsplit.splitting(body, scheme, split, **options)
+    flows = body.split(split, **options)
+    cls = _VARIANTS[variant.removesuffix("+barrier")]
+    return jaxsplit.compose(tuple(cls(f.axis, f.rate) for f in flows), scheme)

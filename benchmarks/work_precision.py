@@ -125,7 +125,7 @@ def splitting_cases(quick: bool):
     m0 = jnp.asarray(M0)
     cases = []
     for scheme, split, variant in SPLITTINGS:
-        step = step_variant(BODY, scheme, split, variant, shift_axis=2)
+        step = step_variant(BODY, scheme, split, variant, shift=1)
         label = f"jaxsplit {scheme} ({split}), " + ("working-tree library" if variant == "library"
                                                   else f"{variant} flows")
         for n in splitting_counts(scheme, quick):

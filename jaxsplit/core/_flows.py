@@ -32,10 +32,13 @@ class AbstractFlow(eqx.Module):
         return treedef, tuple(("array", id(leaf)) if eqx.is_array(leaf) else leaf for leaf in leaves)
 
     def __hash__(self):
-        return hash(self._identity_key())
+        try:
+            return super().__hash__()  # by fields: a module without arrays (a static half)
+        except TypeError:
+            return hash(self._identity_key())
 
     def __eq__(self, other):
-        return type(self) is type(other) and self._identity_key() == other._identity_key()
+        return self is other or (type(self) is type(other) and self._identity_key() == other._identity_key())
 
     @property
     def is_group(self) -> bool:

@@ -1,13 +1,15 @@
 """The one stepping loop: a fixed-step ``lax.scan`` (a scan of scans when saving).
 
-``integrate`` is the jit boundary (``equinox.filter_jit``): the arrays inside ``step``
-(its flows' parameters), the state and the step size are traced, so a new body, a new
-``h`` or new initial conditions reuse compiled code; step counts and everything else in
-``step`` are static. Python floats inside ``step`` are parameters too and are turned into
-arrays before the boundary (else every value would compile anew). Any ``step(state, h)``
-works; a ``Composition`` also merges sub-flows across step boundaries (``advance``).
+``integrate`` is the jit boundary. ``step`` is split by its own PyTree flattening: the
+modules declare their structure (static fields: axes, words, schemes, layouts) in the tree
+definition, and every leaf that is an array or a Python float is a parameter, traced, so a
+new body, a new ``h`` or new initial conditions reuse compiled code (a float counted as
+static would compile anew for every value); the remaining leaves (functions, integers)
+and the step counts are static. Any ``step(state, h)`` works; a ``Composition`` also
+merges sub-flows across step boundaries (``advance``).
 """
 
+import functools
 import math
 from typing import Any, NamedTuple
 
@@ -50,9 +52,28 @@ def compilations() -> int:
     return _TRACES[0]
 
 
-@eqx.filter_jit
-def _run(step, x0, h, n_steps: int, save_every: int | None):
+def _is_parameter(leaf) -> bool:
+    return eqx.is_array(leaf) or type(leaf) is float
+
+
+def split_parameters(step):
+    """(parameters: the array and float leaves, static: (treedef, the other leaves))."""
+    leaves, treedef = jax.tree_util.tree_flatten(step)
+    parameters = [leaf if _is_parameter(leaf) else None for leaf in leaves]
+    static = tuple(None if _is_parameter(leaf) else leaf for leaf in leaves)
+    return parameters, (treedef, static)
+
+
+def join_parameters(parameters, static):
+    treedef, others = static
+    return jax.tree_util.tree_unflatten(treedef, [p if s is None else s for p, s in zip(parameters, others)])
+
+
+@functools.partial(jax.jit, static_argnames=("static", "n_steps", "save_every"))
+def _run(parameters, static, x0, h, n_steps: int, save_every: int | None):
     _TRACES[0] += 1  # runs only while tracing
+    step = join_parameters(parameters, static)
+    h = jnp.asarray(h, dtype=float_dtype(x0))
     if save_every is None:
         return advance(step, x0, h, n_steps)
     blocks, rest = divmod(n_steps, save_every)
@@ -72,23 +93,25 @@ def _run(step, x0, h, n_steps: int, save_every: int | None):
     return Trajectory(jnp.asarray(counts, dtype=h.dtype) * h, xs)
 
 
-def traced_parameters(step):
-    """``step`` with its Python-float leaves as arrays (parameters are traced wherever they sit)."""
-    return jax.tree_util.tree_map(lambda leaf: jnp.asarray(leaf) if type(leaf) is float else leaf, step)
-
-
-def step_size(h, dtype):
-    """``h`` as a finite real scalar of ``dtype`` (concrete values checked)."""
-    if h is None or isinstance(h, (str, bytes, bool, np.bool_)) or jnp.iscomplexobj(h):
+def step_size(h):
+    """``h`` checked: a real scalar, finite when concrete (cast to the state's dtype later)."""
+    if isinstance(h, (int, float)) and not isinstance(h, bool):
+        if not math.isfinite(h):
+            raise InputError(f"h must be a finite step size, got {h!r}")
+        return h
+    if h is None or isinstance(h, (str, bytes, bool, np.bool_)):
         raise InputError(f"h must be a real scalar step size, got {h!r}")
-    try:
-        h = jnp.asarray(h, dtype=dtype)
-    except (TypeError, ValueError) as err:
-        raise InputError(f"h must be a real scalar step size, got {h!r}") from err
-    if h.ndim:
-        raise InputError(f"h must be a scalar step size, got shape {h.shape}")
-    if not isinstance(h, jax.core.Tracer) and not math.isfinite(float(h)):
-        raise InputError(f"h must be finite, got {float(h)}")
+    if isinstance(h, jax.core.Tracer):
+        value = h
+    else:
+        try:
+            value = np.asarray(h)
+        except (TypeError, ValueError) as err:
+            raise InputError(f"h must be a real scalar step size, got {h!r}") from err
+    if value.ndim or not (jnp.issubdtype(value.dtype, jnp.floating) or jnp.issubdtype(value.dtype, jnp.integer)):
+        raise InputError(f"h must be a real scalar step size, got {h!r}")
+    if not isinstance(h, jax.core.Tracer) and not math.isfinite(float(value)):
+        raise InputError(f"h must be a finite step size, got {float(value)}")
     return h
 
 
@@ -107,14 +130,12 @@ def integrate(step, x0, h, n_steps: int, *, save_every: int | None = None):
     if not callable(step):
         raise InputError(f"step must be callable as step(state, h), got {step!r}")
     x0 = as_state(x0)
-    h = step_size(h, float_dtype(x0))
-    step = traced_parameters(step)
-    static = eqx.partition(step, eqx.is_array)[1]
+    parameters, static = split_parameters(step)
     try:
         hash(static)
     except TypeError as err:
         raise InputError(f"step must be a function or a PyTree of arrays and hashable parts: {err}") from err
-    return _run(step, x0, h, n_steps, save_every)
+    return _run(parameters, static, x0, step_size(h), n_steps, save_every)
 
 
 def integrate_checkpointed(step, x0, h, n_steps: int, *, block: int | None = None):
@@ -129,7 +150,7 @@ def integrate_checkpointed(step, x0, h, n_steps: int, *, block: int | None = Non
         block = max(1, math.isqrt(max(n_steps, 1)))
     block = check_count(block, "block", 1)
     x0 = as_state(x0)
-    h = step_size(h, float_dtype(x0))
+    h = jnp.asarray(step_size(h), dtype=float_dtype(x0))
     blocks, rest = divmod(n_steps, block)
     run_block = jax.checkpoint(lambda x: advance(step, x, h, block))
     x = jax.lax.scan(lambda y, _: (run_block(y), None), x0, length=blocks)[0] if blocks else x0

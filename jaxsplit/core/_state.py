@@ -28,6 +28,8 @@ def as_state(x0, name: str = "x0"):
     """Leaves as arrays. A state whose leaves are all integers (``m0 = [1, 0, 0]``) is
     promoted to the default float dtype; in a state with floating leaves, integer leaves
     stay integers. Complex, boolean, empty and non-numeric states are refused."""
+    if isinstance(x0, jax.Array) and jnp.issubdtype(x0.dtype, jnp.floating):
+        return x0  # the common case, cheaply
     leaves, treedef = jax.tree_util.tree_flatten(x0)
     if not leaves:
         raise InputError(f"{name} must hold at least one array, got {x0!r}")

@@ -207,11 +207,11 @@ def _case_kernel(family, scheme, split, options: tuple):
     return jax.vmap(run)
 
 
-def _reference_kernel(family, scheme, split, options: tuple, n_ref: int):
-    """Per-case reference (x0, params, t_end) -> (x(t_end) with n_ref steps, with n_ref/2).
+def _reference_kernel(family, scheme, split, options: tuple):
+    """Per-case reference (x0, params, t_end, n) -> (x(t_end) with n steps, with n/2).
 
-    Both runs share one compiled step inside a ``while_loop`` (a traced step count), which
-    keeps the compilation of long high-order words short.
+    Both runs share one compiled step inside a ``while_loop`` (a traced step count: a
+    refinement compiles nothing new), which keeps the compilation of long words short.
     """
     options = dict(options)
 
@@ -221,8 +221,8 @@ def _reference_kernel(family, scheme, split, options: tuple, n_ref: int):
         return jax.lax.while_loop(lambda c: c[0] < n, lambda c: (c[0] + 1, step(c[1], h)),
                                   (jnp.zeros_like(n), x0))[1]
 
-    def run(x0, params, t_end):
-        counts = jnp.asarray([n_ref, n_ref // 2], dtype=jnp.int32)
+    def run(x0, params, t_end, n_ref):
+        counts = jnp.stack([n_ref, n_ref // 2])
         both = jax.vmap(one, in_axes=(None, None, None, 0))(x0, params, t_end, counts)
         return take(both, 0), take(both, 1)
 
@@ -248,13 +248,19 @@ def reference_steps(rate, t_end: float, angle: float) -> int:
     return n + (n % 2)
 
 
+REFERENCE_TOL = 1e-12  # reference refined (x4 steps) until |run - half-step run| <= this x max|x|
+MAX_REFINEMENTS = 3
+
+
 def reference_solution(x0, params, t_end: float, *, system=None, scheme="kahan-li-8", split=None,
-                       angle: float = 0.1, chunk_size: int = 1024, devices=None, **split_options):
+                       angle: float = 0.1, tol: float = REFERENCE_TOL, chunk_size: int = 1024, devices=None,
+                       **split_options):
     """x(t_end) for each case (x0[i], params[i]) of the family ``system`` (default
     ``RigidBody``: x0 = m0 (N, 3), params = inertia (N, 3)), by ``scheme`` (8th order by
     default) on the system's ``reference_split`` (or ``split`` with ``split_options``) with
-    steps moving the fastest piece by <= ``angle``; returns ``(reference, accuracy)`` where
-    ``accuracy`` is |run − run with half the steps| (max norm per case)."""
+    steps moving the fastest piece by <= ``angle`` (``batch.max_rate``), refined (4x the
+    steps, at most 3 times) while |run − run with half the steps| > ``tol`` max|x|; returns
+    ``(reference, accuracy)``, ``accuracy`` being that difference (max norm per case)."""
     family = family_of(system)
     scheme = schemes.resolve(scheme)
     _, x0, params, _ = case_arrays({"x0": x0, "params": params, "h": np.ones(len(jax.tree_util.tree_leaves(x0)[0]))})
@@ -262,23 +268,29 @@ def reference_solution(x0, params, t_end: float, *, system=None, scheme="kahan-l
     devices = resolve_devices(devices)
     if split is None:
         split, split_options = build(family, take(params, 0)).reference_split
-    t = np.full(ravel_rows(x0).shape[0], t_end, dtype=ravel_rows(x0).dtype)
-    fine, coarse = None, None
+    rows = ravel_rows(x0)
+    t = np.full(rows.shape[0], t_end, dtype=rows.dtype)
+    scale = np.max(np.abs(rows), axis=1)
+    fine, accuracy = None, np.empty(len(t))
     for name, opts, idx in resolved_groups(family, params, split, split_options):
         key = tuple(sorted(opts.items()))
         rate_fn = compiled(("rate", family, name, key), lambda name=name, key=key: _rate_kernel(family, name, key), None)
         rate = np.asarray(rate_fn(take(x0, idx), take(params, idx)))
         n_ref = reference_steps(rate, t_end, angle)
-        fn = compiled(("ref", family, scheme, name, key, n_ref),
-                      lambda n_ref=n_ref, name=name, key=key: _reference_kernel(family, scheme, name, key, n_ref),
-                      devices)
-        f, c = chunked(fn, [take(x0, idx), take(params, idx), t[idx]], chunk_size, len(devices))
+        fn = compiled(("ref", family, scheme, name, key),
+                      lambda name=name, key=key: _reference_kernel(family, scheme, name, key), devices)
+        for _ in range(MAX_REFINEMENTS + 1):
+            counts = np.full(len(idx), n_ref, dtype=np.int32)
+            f, c = chunked(fn, [take(x0, idx), take(params, idx), t[idx], counts], chunk_size, len(devices))
+            acc = np.max(np.abs(ravel_rows(f) - ravel_rows(c)), axis=1)
+            if np.all(acc <= tol * scale[idx]) or 4 * n_ref > MAX_STEPS:
+                break
+            n_ref *= 4
         if fine is None:
             fine = jax.tree_util.tree_map(lambda a: np.empty((len(t),) + a.shape[1:], a.dtype), f)
-            coarse = jax.tree_util.tree_map(np.empty_like, fine)
-        for dst, src in ((fine, f), (coarse, c)):
-            jax.tree_util.tree_map(lambda d, s, idx=idx: d.__setitem__(idx, s), dst, src)
-    return fine, np.max(np.abs(ravel_rows(fine) - ravel_rows(coarse)), axis=1)
+        jax.tree_util.tree_map(lambda d, s, idx=idx: d.__setitem__(idx, s), fine, f)
+        accuracy[idx] = acc
+    return fine, accuracy
 
 
 def _check_t_end(t_end):

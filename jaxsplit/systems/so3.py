@@ -149,8 +149,9 @@ def momentum(state, parts):
     if parts is None:
         return check_shape(state, "momentum")
     if not isinstance(state, tuple) or len(state) != len(parts):
-        raise InputError(f"the state must be a tuple of {len(parts)} parts {parts}, got {type(state).__name__}"
-                         + (f" of length {len(state)}" if isinstance(state, tuple) else ""))
+        got = (f"a tuple of length {len(state)}" if isinstance(state, tuple) else
+               f"an array of shape {tuple(state.shape)}" if hasattr(state, "shape") else type(state).__name__)
+        raise InputError(f"the state must be a tuple of {len(parts)} parts {parts}, got {got}")
     return check_shape(state[parts.index("momentum")], "momentum")
 
 
