@@ -3,9 +3,9 @@ test_system_layer.py (a free body carrying a vector, state (m, v)) through each.
 
 import jax.numpy as jnp
 import numpy as np
+from test_system_layer import CarriedVector
 
 import jaxsplit
-from test_system_layer import CarriedVector
 
 CASIMIR_TOL = 1e-13
 POISSON_TOL = 1e-13

@@ -3,6 +3,7 @@ flows as modules with traced parameters, nesting, invalid combinations, PyTree c
 
 import inspect
 import re
+from typing import ClassVar
 
 import jax
 import jax.numpy as jnp
@@ -180,7 +181,7 @@ def test_a_composition_is_a_flow_and_nests():
 class Attitude(CarriedVector):
     """The same body, refusing the Casimir shift with a reason (as the attitude system does)."""
 
-    refused_splits = {"casimir": "C = |m|²/2 is no Casimir of the larger structure"}
+    refused_splits: ClassVar[dict] = {"casimir": "C = |m|²/2 is no Casimir of the larger structure"}
 
 
 def test_invalid_combinations_are_clear_errors():
