@@ -76,8 +76,8 @@ def main(argv=None):
     out = {"command": "python benchmarks/ab_commits.py " + " ".join(argv or sys.argv[1:]), "base": base,
            "head": head, "rounds": args.rounds, "date_utc": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
            "rows": table, "wall_s": time.perf_counter() - start}
-    lines = [f"# A/B: `{base}` (old) against `{head}` (new), `throughput.py --quick`, {args.rounds} interleaved "
-             "rounds each", "", f"`{out['command']}` ({out['date_utc']}, {out['wall_s']:.0f} s)", "",
+    title = f"# A/B: `{base}` (old) against `{head}` (new), `throughput.py --quick`, {args.rounds} interleaved rounds"
+    lines = [title, "", f"`{out['command']}` ({out['date_utc']}, {out['wall_s']:.0f} s)", "",
              "| method | old ns/rotation | new ns/rotation | new / old (median of rounds) | old compile | new compile |",
              "|---|---|---|---|---|---|"]
     for r in table:

@@ -35,7 +35,7 @@ def loss_fn(n_steps: int, checkpointed: bool, m0s):
         def final(m0):
             if checkpointed:
                 return jaxsplit.integrate_checkpointed(step, m0, 0.01, n_steps)
-            return jaxsplit.integrate(step, m0, 0.01, n_steps)
+            return jaxsplit.integrate(step, m0, 0.01, n_steps).final
 
         return jnp.sum((jax.vmap(final)(m0s) - target) ** 2)
 

@@ -59,7 +59,7 @@ BATCHES = (1, 64, 1024, 16384)
 def jaxsplit_run(scheme: str, split: str, n: int):
     def run(m0, h, inertia):
         step = jaxsplit.splitting(jaxsplit.RigidBody(inertia), scheme, split, **({"shift": SHIFT} if split == "casimir" else {}))
-        return jaxsplit.integrate(step, m0, h, n)
+        return jaxsplit.integrate(step, m0, h, n).final
 
     return run
 
@@ -143,7 +143,7 @@ def variant_run(scheme: str, split: str, variant: str, n: int):
 
     def run(m0, h, inertia):
         step = step_variant(jaxsplit.RigidBody(inertia), scheme, split, variant, SHIFT)
-        return jaxsplit.integrate(step, m0, h, n)
+        return jaxsplit.integrate(step, m0, h, n).final
 
     return run
 
@@ -390,13 +390,13 @@ def dispatch_overhead(repeats: int, out: dict, lines: list):
     """Per-call cost of ``jaxsplit.integrate`` (Python-side partition + jit cache) at n = 1."""
     step = jaxsplit.splitting(jaxsplit.RigidBody(INERTIA), "strang", "casimir")
     m0, h = jnp.asarray(M0), jnp.asarray(H)
-    compiled, _ = aot(lambda m0, h: jaxsplit.integrate(step, m0, h, 1), m0, h)
-    jax.block_until_ready(jaxsplit.integrate(step, m0, h, 1))
+    compiled, _ = aot(lambda m0, h: jaxsplit.integrate(step, m0, h, 1).final, m0, h)
+    jax.block_until_ready(jaxsplit.integrate(step, m0, h, 1).final)
     inner = 100
 
     def direct():
         for _ in range(inner):
-            x = jaxsplit.integrate(step, m0, h, 1)
+            x = jaxsplit.integrate(step, m0, h, 1).final
         jax.block_until_ready(x)
 
     def precompiled():
@@ -404,13 +404,13 @@ def dispatch_overhead(repeats: int, out: dict, lines: list):
             x = compiled(m0, h)
         jax.block_until_ready(x)
 
-    times = interleaved({"integrate()": direct, "AOT-compiled": precompiled}, repeats)
-    d, p = (statistics.median(times[k]) / inner for k in ("integrate()", "AOT-compiled"))
+    times = interleaved({"integrate().final": direct, "AOT-compiled": precompiled}, repeats)
+    d, p = (statistics.median(times[k]) / inner for k in ("integrate().final", "AOT-compiled"))
     out["dispatch"] = {"integrate_call_s": d, "compiled_call_s": p}
     lines += [
         "### Per-call overhead (n = 1 step)",
         "",
-        (f"`jaxsplit.integrate(step, m0, h, 1)` costs {fmt(d)} per call against {fmt(p)} for the same "
+        (f"`jaxsplit.integrate(step, m0, h, 1).final` costs {fmt(d)} per call against {fmt(p)} for the same "
         f"program called pre-compiled: {fmt(d - p)} of Python-side work per call (PyTree "
         "partition, hashing the static spec, jit cache lookup). It matters only for short runs."),
         "",

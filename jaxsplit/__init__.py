@@ -60,6 +60,7 @@ from .core._errors import InputError as InputError
 from .core._flows import AbstractFlow as AbstractFlow
 from .core._flows import FunctionFlow as FunctionFlow
 from .core._flows import Substeps as Substeps
+from .core._integrate import Solution as Solution
 from .core._integrate import Trajectory as Trajectory
 from .core._integrate import integrate as integrate
 from .core._integrate import integrate_checkpointed as integrate_checkpointed

@@ -48,7 +48,7 @@ REFERENCE_TABLE = [
 def test_reproduces_the_reference_error_table(name, split, shift, steps, expected):
     """Independent check of composition order and conventions (50-digit-verified table)."""
     step = jaxsplit.splitting(STANDARD, name, split, **({"shift": shift - 1} if shift else {}))
-    error = np.abs(np.asarray(jaxsplit.integrate(step, M0, 10.0 / steps, steps)) - REFERENCE).max()
+    error = np.abs(np.asarray(jaxsplit.integrate(step, M0, 10.0 / steps, steps).final) - REFERENCE).max()
     assert abs(error / expected - 1) <= TABLE_RTOL
 
 
@@ -57,7 +57,7 @@ def test_automatic_casimir_shift_beats_the_other_axes():
     errors = {}
     for shift in ("auto", 0, 1, 2):
         step = jaxsplit.splitting(STANDARD, "strang", "casimir", shift=shift)
-        errors[shift] = np.abs(np.asarray(jaxsplit.integrate(step, M0, 0.0625, 160)) - REFERENCE).max()
+        errors[shift] = np.abs(np.asarray(jaxsplit.integrate(step, M0, 0.0625, 160).final) - REFERENCE).max()
     assert errors["auto"] == errors[1] < min(errors[0], errors[2])
 
 
@@ -66,7 +66,7 @@ def test_automatic_shift_is_exact_for_a_symmetric_body():
     m0 = jnp.asarray(jaxsplit.PAPER_M0)
     step = jaxsplit.splitting(body, "lie-trotter", "casimir")
     exact = jaxsplit.symmetric_solution(body, m0, 50.0)
-    assert np.abs(jaxsplit.integrate(step, m0, 0.5, 100) - exact).max() < ROUNDOFF
+    assert np.abs(jaxsplit.integrate(step, m0, 0.5, 100).final - exact).max() < ROUNDOFF
 
 
 def test_rotation_counts_after_merging():
@@ -99,8 +99,8 @@ def test_lie_trotter_is_not_reversible_but_its_adjoint_inverts_it():
 def test_merged_and_unmerged_compositions_agree(name, split):
     merged = jaxsplit.splitting(STANDARD, name, split)
     unmerged = jaxsplit.splitting(STANDARD, name, split, merge_flows=False)
-    a = jaxsplit.integrate(merged, M0, 0.05, 1000)
-    b = jaxsplit.integrate(unmerged, M0, 0.05, 1000)
+    a = jaxsplit.integrate(merged, M0, 0.05, 1000).final
+    b = jaxsplit.integrate(unmerged, M0, 0.05, 1000).final
     assert np.abs(a - b).max() <= MERGE_TOL
 
 
@@ -109,7 +109,7 @@ def test_output_dtype_follows_the_input(dtype):
     step = jaxsplit.splitting(STANDARD, "kahan-li-6", "casimir")
     x = M0.astype(dtype)
     assert step(x, 0.1).dtype == dtype
-    assert jaxsplit.integrate(step, x, 0.1, 10).dtype == dtype
+    assert jaxsplit.integrate(step, x, 0.1, 10).final.dtype == dtype
     traj = jaxsplit.integrate(step, x, 0.1, 10, save_every=3)
     assert traj.x.dtype == dtype and traj.t.dtype == dtype
 
@@ -131,7 +131,7 @@ def test_vmap_over_initial_conditions_and_bodies_matches_a_loop():
 
     def run(inertia, m0):
         step = jaxsplit.splitting(RigidBody(inertia), "blanes-moan-s6-prk", "casimir", shift=1)
-        return jaxsplit.integrate(step, m0, 0.05, 200)
+        return jaxsplit.integrate(step, m0, 0.05, 200).final
 
     batched = jax.jit(jax.vmap(run))(inertias, states)
     looped = jnp.stack([run(i, m) for i, m in zip(inertias, states)])
@@ -141,7 +141,7 @@ def test_vmap_over_initial_conditions_and_bodies_matches_a_loop():
 def test_gradient_through_the_integrator_matches_finite_differences():
     def loss(inertia, m0):
         step = jaxsplit.splitting(RigidBody(inertia), "strang")
-        return jnp.sum(jaxsplit.integrate(step, m0, 0.05, 400) ** 3)
+        return jnp.sum(jaxsplit.integrate(step, m0, 0.05, 400).final ** 3)
 
     inertia = jnp.asarray(jaxsplit.STANDARD_CASE.inertia)
     grads = jax.grad(loss, argnums=(0, 1))(inertia, M0)
@@ -158,8 +158,8 @@ def test_gradient_through_the_integrator_matches_finite_differences():
 
 def test_negative_step_integrates_backwards():
     step = jaxsplit.splitting(STANDARD, "kahan-li-8", "casimir")
-    there = jaxsplit.integrate(step, M0, 0.1, 500)
-    back = jaxsplit.integrate(step, there, -0.1, 500)
+    there = jaxsplit.integrate(step, M0, 0.1, 500).final
+    back = jaxsplit.integrate(step, there, -0.1, 500).final
     assert np.abs(back - M0).max() <= ACCUMULATED_ROUNDOFF
 
 
@@ -169,8 +169,8 @@ def test_saving_keeps_the_start_every_kth_state_and_the_end():
     np.testing.assert_allclose(traj.t, [0.0, 0.4, 0.8, 1.0], rtol=1e-15)
     for t, x in zip(traj.t, traj.x):
         n = round(float(t) / 0.1)
-        assert np.abs(x - jaxsplit.integrate(step, M0, 0.1, n)).max() <= ROUNDOFF
-    assert jaxsplit.integrate(step, M0, 0.1, 0) is not None
+        assert np.abs(x - jaxsplit.integrate(step, M0, 0.1, n).final).max() <= ROUNDOFF
+    assert jaxsplit.integrate(step, M0, 0.1, 0).final is not None
 
 
 @pytest.mark.parametrize("bad", [-1, 2.5, True, "10"])
@@ -195,7 +195,7 @@ def test_composer_is_generic_over_pytree_states_and_user_flows():
     errors = []
     for n in (100, 200):
         step = jaxsplit.compose([kick, drift], "strang", params=jnp.array(1.0))
-        x = jaxsplit.integrate(step, x0, 1.0 / n, n)
+        x = jaxsplit.integrate(step, x0, 1.0 / n, n).final
         errors.append(abs(float(x["q"]) - np.cos(1.0)))
     assert abs(np.log2(errors[0] / errors[1]) - 2) < 0.05
 
@@ -204,5 +204,5 @@ def test_any_pure_function_can_be_stepped():
     def euler(m, h):
         return m + h * STANDARD.vector_field(m)
 
-    m = jaxsplit.integrate(euler, M0, 0.01, 100)
+    m = jaxsplit.integrate(euler, M0, 0.01, 100).final
     assert float(jnp.sum(m * m)) > float(jnp.sum(M0 * M0))  # Euler inflates |m|

@@ -97,7 +97,7 @@ def test_newton_converges_to_round_off(name):
 
 def _loss(m0, h, inertia):
     step = gauss_legendre(RigidBody(inertia), 2)
-    m = integrate(step, m0, h, 20)
+    m = integrate(step, m0, h, 20).final
     return m[0] + 2 * m[1] ** 2 - m[2]
 
 
@@ -120,8 +120,8 @@ def test_gradients_match_finite_differences():
 
 
 def test_forward_mode_matches_reverse_mode():
-    jf = jax.jacfwd(lambda m: integrate(gauss_legendre(BODY, 3), m, 0.2, 5))(M0)
-    jr = jax.jacrev(lambda m: integrate(gauss_legendre(BODY, 3), m, 0.2, 5))(M0)
+    jf = jax.jacfwd(lambda m: integrate(gauss_legendre(BODY, 3), m, 0.2, 5).final)(M0)
+    jr = jax.jacrev(lambda m: integrate(gauss_legendre(BODY, 3), m, 0.2, 5).final)(M0)
     assert float(jnp.max(jnp.abs(jf - jr))) <= 1e-13
 
 

@@ -60,7 +60,7 @@ def test_the_user_system_is_at_most_30_lines_of_public_names():
 @pytest.fixture(scope="module")
 def reference():
     tight = jaxsplit.splitting(SYSTEM, "kahan-li-8")
-    return jaxsplit.integrate(tight, X0, T_END / 4000, 4000)
+    return jaxsplit.integrate(tight, X0, T_END / 4000, 4000).final
 
 
 @pytest.mark.parametrize("scheme", SCHEMES)
@@ -128,9 +128,9 @@ def test_parameters_are_traced_wherever_they_sit():
     x0 = X0
     jaxsplit.integrate(_heavy_step(jnp.array([2.0, 1.0, 0.5]), jnp.array([0.0, 0.0, 0.3]), 1.0), x0, 0.1, 20)
     before = compilations()
-    a = jaxsplit.integrate(_heavy_step(jnp.array([3.0, 1.5, 0.7]), jnp.array([0.0, 0.0, 0.3]), 1.0), x0, 0.1, 20)
-    b = jaxsplit.integrate(_heavy_step(jnp.array([3.0, 1.5, 0.7]), jnp.array([0.1, 0.0, 0.5]), 1.0), x0, 0.1, 20)
-    c = jaxsplit.integrate(_heavy_step(jnp.array([3.0, 1.5, 0.7]), jnp.array([0.1, 0.0, 0.5]), 2.5), x0, 0.05, 20)
+    a = jaxsplit.integrate(_heavy_step(jnp.array([3.0, 1.5, 0.7]), jnp.array([0.0, 0.0, 0.3]), 1.0), x0, 0.1, 20).final
+    b = jaxsplit.integrate(_heavy_step(jnp.array([3.0, 1.5, 0.7]), jnp.array([0.1, 0.0, 0.5]), 1.0), x0, 0.1, 20).final
+    c = jaxsplit.integrate(_heavy_step(jnp.array([3.0, 1.5, 0.7]), jnp.array([0.1, 0.0, 0.5]), 2.5), x0, 0.05, 20).final
     assert compilations() == before  # new inertia, centre of mass, weight (a float) and h
     assert float(jnp.max(jnp.abs(a[0] - b[0]))) > 1e-3 and float(jnp.max(jnp.abs(b[0] - c[0]))) > 1e-3
     jaxsplit.integrate(_heavy_step(jnp.array([3.0, 1.5, 0.7]), jnp.array([0.1, 0.0, 0.5]), 2.5), x0, 0.05, 21)
@@ -142,7 +142,7 @@ def test_rigid_body_parameters_trace_through_grad_and_vmap():
 
     def final(inertia):
         return jaxsplit.integrate(jaxsplit.splitting(jaxsplit.RigidBody(inertia), "strang", "casimir", shift=1),
-                                  m0, 0.1, 50)
+                                  m0, 0.1, 50).final
 
     inertias = jnp.array([[2.0, 1.0, 0.7], [3.0, 2.0, 1.0]])
     batched = jax.vmap(final)(inertias)
@@ -168,13 +168,13 @@ def test_a_composition_is_a_flow_and_nests():
     strang = jaxsplit.compose([jaxsplit.compose([f0, f1], "strang"), f2], "strang")
     assert [p for p, _ in strang.word] == [0, 1, 0] and not strang.fsal
     body = jaxsplit.RigidBody([2.0, 1.0, 2 / 3])
-    ref = jaxsplit.integrate(jaxsplit.splitting(body, "kahan-li-8", "casimir"), m, 0.01, 1000)
+    ref = jaxsplit.integrate(jaxsplit.splitting(body, "kahan-li-8", "casimir"), m, 0.01, 1000).final
     fit = jaxsplit.estimate_order(strang, m, 10.0, jaxsplit.ladder(100, 8.0, 6), ref)
     assert abs(fit.order - 2) <= ORDER_TOL
     # sub-stepping a piece: Substeps(flow, n) is a flow that is not a group
     sub = jaxsplit.Substeps(jaxsplit.rk4(body), 4)
     assert not sub.is_group
-    np.testing.assert_allclose(sub(m, 0.2), jaxsplit.integrate(jaxsplit.rk4(body), m, 0.05, 4), atol=ROUNDOFF)
+    np.testing.assert_allclose(sub(m, 0.2), jaxsplit.integrate(jaxsplit.rk4(body), m, 0.05, 4).final, atol=ROUNDOFF)
 
 
 # ------------------------------------------------------------------ invalid combinations
@@ -211,7 +211,7 @@ def test_integer_leaves_are_left_alone():
     rotations = [jaxsplit.AxisRotation(f.axis, f.rate, ("momentum", "fixed")) for f in step.flows]
     step = jaxsplit.compose(rotations, "strang")
     x0 = (jnp.array([0.4, 0.0, 0.9]), jnp.array([7, 8], dtype=jnp.int32))
-    out = jaxsplit.integrate(step, x0, 0.1, 10)
+    out = jaxsplit.integrate(step, x0, 0.1, 10).final
     assert out[1].dtype == jnp.int32 and np.array_equal(out[1], x0[1])
     traj = jaxsplit.integrate(step, x0, 0.1, 10, save_every=5)
     assert traj.x[1].dtype == jnp.int32 and traj.x[0].dtype == x0[0].dtype
@@ -219,6 +219,6 @@ def test_integer_leaves_are_left_alone():
     errors = jaxsplit.invariant_errors(lambda x: x[0] @ x[0], traj)
     assert float(errors.max_relative) <= CASIMIR_TOL
     plain = jaxsplit.splitting(jaxsplit.RigidBody([2.0, 1.0, 0.5]), "strang")
-    assert jaxsplit.integrate(plain, jnp.array([1, 0, 0]), 0.1, 3).dtype == jnp.result_type(float)
+    assert jaxsplit.integrate(plain, jnp.array([1, 0, 0]), 0.1, 3).final.dtype == jnp.result_type(float)
     with pytest.raises(InputError, match=r"tuple of 2 parts .* got an array of shape \(3,\)"):
         jaxsplit.integrate(step, jnp.array([1.0, 0, 0]), 0.1, 3)

@@ -86,7 +86,7 @@ def estimate_order(step, x0, t_end: float, counts, reference=None, *, reference_
         if n_ref < 1:
             raise InputError(f"reference_count must be >= 1, got {reference_count!r}")
         x0 = as_state(x0)
-        reference = integrate(reference_step, x0, jnp.asarray(t_end / n_ref, dtype=float_dtype(x0)), n_ref)
+        reference = integrate(reference_step, x0, jnp.asarray(t_end / n_ref, dtype=float_dtype(x0)), n_ref).final
     elif callable(reference):
         reference = reference(t_end)
     hs, errors = global_errors(step, x0, t_end, counts, reference)

@@ -458,7 +458,7 @@ def run_chunked(step, x0, h, n_steps: int, save_every: int, *, flows_per_step: i
             else:
                 next_save = (done // save_every + 1) * save_every
                 n = min(chunk, next_save - done, n_steps - done)
-                x_end = integrate(step, x, h, n)
+                x_end = integrate(step, x, h, n).final
                 is_save = done + n == next_save or done + n == n_steps
                 xs = np.asarray(x_end)[None]
                 local = np.array([n], dtype=np.int64)

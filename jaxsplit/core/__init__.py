@@ -15,6 +15,7 @@ from ._errors import InputError as InputError
 from ._flows import AbstractFlow as AbstractFlow
 from ._flows import FunctionFlow as FunctionFlow
 from ._flows import Substeps as Substeps
+from ._integrate import Solution as Solution
 from ._integrate import Trajectory as Trajectory
 from ._integrate import integrate as integrate
 from ._integrate import integrate_checkpointed as integrate_checkpointed

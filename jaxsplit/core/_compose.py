@@ -100,22 +100,36 @@ class Composition(AbstractFlow):
     def is_group(self) -> bool:
         return False
 
-    def advance(self, state, h, n: int):
-        """``n`` steps, merging the last sub-flow of each step with the first of the next."""
+    def advance(self, state, h, n):
+        """``n`` steps, merging the last sub-flow of each step with the first of the next.
+
+        ``n`` is a Python int (a ``lax.scan``) or a traced integer (a ``fori_loop``).
+        """
         h = _like_state(h, state)
-        if n == 0:
+        static = isinstance(n, int)
+        if static and n == 0:
             return state
-        if not self.fsal or n == 1:
-            return jax.lax.scan(lambda x, _: (self(x, h), None), state, length=n)[0]
+        if not self.fsal or (static and n == 1):
+            if static:
+                return jax.lax.scan(lambda x, _: (self(x, h), None), state, length=n)[0]
+            return jax.lax.fori_loop(0, n, lambda _, x: self(x, h), state)
         (piece, first), middle, (_, last) = self.word[0], self.word[1:-1], self.word[-1]
         joint = middle + ((piece, last + first),)
 
         def body(x, _):
             return _apply(self.flows, joint, x, h), None
 
-        state = _apply(self.flows, ((piece, first),), state, h)
-        state = jax.lax.scan(body, state, length=n - 1)[0]
-        return _apply(self.flows, middle + ((piece, last),), state, h)
+        def merged(x):
+            x = _apply(self.flows, ((piece, first),), x, h)
+            if static:
+                x = jax.lax.scan(body, x, length=n - 1)[0]
+            else:
+                x = jax.lax.fori_loop(0, n - 1, lambda _, y: body(y, None)[0], x)
+            return _apply(self.flows, middle + ((piece, last),), x, h)
+
+        if static:
+            return merged(state)
+        return jax.lax.cond(n > 0, merged, lambda x: x, state)
 
     @property
     def flows_per_step(self) -> int:

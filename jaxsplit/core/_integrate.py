@@ -1,4 +1,15 @@
-"""The one stepping loop: a fixed-step ``lax.scan`` (a scan of scans when saving).
+"""The one stepping loop, the jit boundary, and its result.
+
+``integrate`` advances ``step`` with a fixed step size by a ``lax.scan`` (a scan of scans
+when saving every k-th state) and returns one result type, ``Solution``: the saved times
+and states (always the initial and the final one), the final state one attribute away,
+the step count, the step size, the scheme, and whether every state stayed finite.
+
+Output at arbitrary times (``ts=``): each requested state is a *partial step* of the scheme
+from the last grid state before it, Ψ_δ(x_k) with δ = t − t_k, so it is the image of a
+Poisson map of the same scheme (Casimirs to round-off, the scheme's accuracy), not an
+interpolant that leaves the symplectic leaf. The grid is advanced with traced step counts,
+so a new set of times of the same length reuses the compiled code.
 
 ``integrate`` is the jit boundary. ``step`` is split by its own PyTree flattening: the
 modules declare their structure (static fields: axes, words, schemes, layouts) in the tree
@@ -6,36 +17,52 @@ definition, and every leaf that is an array or a Python float is a parameter, tr
 new body, a new ``h`` or new initial conditions reuse compiled code (a float counted as
 static would compile anew for every value); the remaining leaves (functions, integers)
 and the step counts are static. Any ``step(state, h)`` works; a ``Composition`` also
-merges sub-flows across step boundaries (``advance``).
+merges sub-flows across step boundaries. ``adjoint`` chooses what reverse mode stores
+(``_adjoints``).
 """
 
 import functools
 import math
-from typing import Any, NamedTuple
+from typing import Any
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._adjoints import advance, advance_checkpointed, check_adjoint
 from ._errors import InputError
 from ._state import as_state, float_dtype
 
 
-class Trajectory(NamedTuple):
-    """States saved every ``save_every`` steps (and the last one): ``x[i]`` at ``t[i]``."""
+class Solution(eqx.Module):
+    """The result of ``integrate``: states ``x[i]`` (any PyTree, leading axis K) at times ``t[i]``.
+
+    ``final`` is the last saved state (the end of the run, or the last requested time);
+    ``n_steps`` the full steps taken (static; ``None`` for ``ts=`` runs), ``h`` the step size, ``scheme`` the scheme's
+    name (``None`` for a plain function), ``finite`` whether every saved state is finite (an
+    array: it vmaps) and ``status`` the same as ``"ok"`` / ``"nonfinite"`` (concrete values).
+    Under ``vmap`` every array field gains the batch axis.
+    """
 
     t: jax.Array
     x: Any
+    h: jax.Array
+    finite: jax.Array
+    n_steps: int | None = eqx.field(static=True)
+    scheme: str | None = eqx.field(static=True, default=None)
+
+    @property
+    def final(self):
+        """The last saved state: the old return value of ``integrate`` without saving."""
+        return jax.tree_util.tree_map(lambda a: a[-1], self.x)
+
+    @property
+    def status(self) -> str:
+        return "ok" if bool(np.all(np.asarray(self.finite))) else "nonfinite"
 
 
-def advance(step, x, h, n: int):
-    """``n`` steps of ``step``; uses the step's own fused ``advance`` when it has one."""
-    if hasattr(step, "advance"):
-        return step.advance(x, h, n)
-    if n == 0:
-        return x
-    return jax.lax.scan(lambda y, _: (step(y, h), None), x, length=n)[0]
+Trajectory = Solution  # the former name of the saved-states result
 
 
 def check_count(value, name: str, minimum: int) -> int:
@@ -69,28 +96,68 @@ def join_parameters(parameters, static):
     return jax.tree_util.tree_unflatten(treedef, [p if s is None else s for p, s in zip(parameters, others)])
 
 
-@functools.partial(jax.jit, static_argnames=("static", "n_steps", "save_every"))
-def _run(parameters, static, x0, h, n_steps: int, save_every: int | None):
+def _finite(x):
+    return jnp.all(jnp.stack([jnp.all(jnp.isfinite(a)) for a in jax.tree_util.tree_leaves(x)
+                              if jnp.issubdtype(a.dtype, jnp.inexact)] or [jnp.asarray(True)]))
+
+
+def _stack(*pieces):
+    return jax.tree_util.tree_map(lambda *a: jnp.concatenate(a), *pieces)
+
+
+def _one(x):
+    return jax.tree_util.tree_map(lambda a: a[None], x)
+
+
+@functools.partial(jax.jit, static_argnames=("static", "n_steps", "save_every", "adjoint"))
+def _run(parameters, static, x0, h, t0, n_steps: int, save_every: int | None, adjoint: str):
     _TRACES[0] += 1  # runs only while tracing
     step = join_parameters(parameters, static)
-    h = jnp.asarray(h, dtype=float_dtype(x0))
+    dtype = float_dtype(x0)
+    h, t0 = jnp.asarray(h, dtype=dtype), jnp.asarray(t0, dtype=dtype)
     if save_every is None:
-        return advance(step, x0, h, n_steps)
-    blocks, rest = divmod(n_steps, save_every)
+        x = advance(step, x0, h, n_steps, adjoint)
+        xs, counts = _stack(_one(x0), _one(x)), [0, n_steps]
+    else:
+        blocks, rest = divmod(n_steps, save_every)
 
-    def block(x, _):
-        x = advance(step, x, h, save_every)
-        return x, x
+        def block(x, _):
+            x = advance(step, x, h, save_every, adjoint)
+            return x, x
 
-    x, saved = jax.lax.scan(block, x0, length=blocks)
-    pieces = [jax.tree_util.tree_map(lambda a: a[None], x0), saved]
-    counts = [0] + [save_every * (k + 1) for k in range(blocks)]
-    if rest:
-        x = advance(step, x, h, rest)
-        pieces.append(jax.tree_util.tree_map(lambda a: a[None], x))
-        counts.append(n_steps)
-    xs = jax.tree_util.tree_map(lambda *a: jnp.concatenate(a), *pieces)
-    return Trajectory(jnp.asarray(counts, dtype=h.dtype) * h, xs)
+        x, saved = jax.lax.scan(block, x0, length=blocks)
+        pieces = [_one(x0), saved]
+        counts = [0] + [save_every * (k + 1) for k in range(blocks)]
+        if rest:
+            x = advance(step, x, h, rest, adjoint)
+            pieces.append(_one(x))
+            counts.append(n_steps)
+        xs = _stack(*pieces)
+    t = t0 + jnp.asarray(counts, dtype=dtype) * h
+    return Solution(t, xs, h, _finite(xs), n_steps, _scheme_name(step))
+
+
+@functools.partial(jax.jit, static_argnames=("static", "adjoint"))
+def _run_at(parameters, static, x0, h, t0, ts, adjoint: str):
+    """States at the times ``ts``: full grid steps, then a partial step from the grid state."""
+    _TRACES[0] += 1
+    step = join_parameters(parameters, static)
+    dtype = float_dtype(x0)
+    h, t0, ts = jnp.asarray(h, dtype=dtype), jnp.asarray(t0, dtype=dtype), jnp.asarray(ts, dtype=dtype)
+    grid = jnp.maximum(jnp.floor((ts - t0) / h), 0).astype(jnp.int32)  # last grid point at or before t
+
+    def output(carry, i):
+        x, k = carry
+        x = advance(step, x, h, grid[i] - k, adjoint)
+        return (x, grid[i]), step(x, ts[i] - (t0 + grid[i] * h))
+
+    _, xs = jax.lax.scan(output, (x0, jnp.zeros((), jnp.int32)), jnp.arange(ts.shape[0]))
+    return Solution(ts, xs, h, _finite(xs), None, _scheme_name(step))
+
+
+def _scheme_name(step):
+    scheme = getattr(step, "scheme", None)
+    return getattr(scheme, "name", None)
 
 
 def step_size(h):
@@ -115,27 +182,72 @@ def step_size(h):
     return h
 
 
-def integrate(step, x0, h, n_steps: int, *, save_every: int | None = None):
-    """Apply ``step(x, h)`` ``n_steps`` times from ``x0`` (any PyTree state).
 
-    Returns the final state, or with ``save_every=k`` a ``Trajectory(t, x)`` holding the
-    initial state, every k-th state and the final one (also when k does not divide
-    ``n_steps``). A negative ``h`` integrates backwards. Works under ``jit``, ``vmap`` and
-    ``grad``; the computation follows the dtype of ``x0``'s floating leaves (integer leaves
-    are left alone; an all-integer state is promoted to the default float).
+
+def _output_times(ts, t0, h):
+    """Concrete checks of ``ts``: a non-empty 1-D array of finite times, ordered in the
+    direction of h and not before t0 (traced values pass unchecked)."""
+    if any(isinstance(v, jax.core.Tracer) for v in (ts, t0, h)):
+        return ts
+    arr = np.asarray(ts)
+    if arr.ndim != 1 or arr.size == 0 or not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
+        raise InputError(f"ts must be a non-empty 1-D array of real output times, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise InputError("ts must be finite")
+    direction = np.sign(float(np.asarray(h))) or 1.0
+    ahead = np.diff(np.concatenate([[float(np.asarray(t0))], arr])) * direction
+    if np.any(ahead < 0):
+        raise InputError(f"ts must be ordered in the direction of h (h = {float(np.asarray(h)):g}) and start at or "
+                         f"after t0 = {float(np.asarray(t0)):g}; got first time {arr[0]:g}")
+    return ts
+
+
+def integrate(step, x0, h, n_steps: int | None = None, *, save_every: int | None = None, ts=None,
+              t0: float = 0.0, adjoint: str = "store") -> Solution:
+    """Advance ``x0`` (any PyTree state) by ``step(x, h)`` with a fixed step ``h``; a ``Solution``.
+
+    * ``integrate(step, x0, h, n)``: ``n`` steps; ``.final`` is the state after them (the saved
+      states are the initial and the final one).
+    * ``save_every=k``: also every k-th state (the final one too when k does not divide n).
+    * ``ts=times`` (instead of ``n``): the states at the given times, each a partial step of
+      the scheme from the last grid state t0 + k h before it (see the module docstring).
+
+    A negative ``h`` integrates backwards. ``t0`` is the initial time. ``adjoint`` is
+    ``"store"``, ``"checkpoint"`` or ``"reversible"`` (see ``jaxsplit.core._adjoints``).
+    Works under ``jit``, ``vmap`` and ``grad``; the computation follows the dtype of
+    ``x0``'s floating leaves (integer leaves are left alone; an all-integer state is
+    promoted to the default float).
+
+    >>> import jax.numpy as jnp, jaxsplit
+    >>> step = jaxsplit.splitting(jaxsplit.RigidBody([2.0, 1.0, 0.5]), "strang", "casimir")
+    >>> sol = jaxsplit.integrate(step, jnp.array([0.6, 0.0, 0.8]), 0.1, 100, save_every=10)
+    >>> sol.final.shape, sol.x.shape, float(sol.t[-1])
+    ((3,), (11, 3), 10.0)
     """
-    n_steps = check_count(n_steps, "n_steps", 0)
-    if save_every is not None:
-        save_every = check_count(save_every, "save_every", 1)
     if not callable(step):
         raise InputError(f"step must be callable as step(state, h), got {step!r}")
+    adjoint = check_adjoint(adjoint, step)
     x0 = as_state(x0)
+    h = step_size(h)
+    if isinstance(t0, (str, bytes, bool)) or t0 is None:
+        raise InputError(f"t0 must be a real number, got {t0!r}")
     parameters, static = split_parameters(step)
     try:
         hash(static)
     except TypeError as err:
         raise InputError(f"step must be a function or a PyTree of arrays and hashable parts: {err}") from err
-    return _run(parameters, static, x0, step_size(h), n_steps, save_every)
+    if ts is not None:
+        if n_steps is not None or save_every is not None:
+            raise InputError("give either ts= (output times) or n_steps (with save_every=), not both")
+        if adjoint == "checkpoint":
+            raise InputError("adjoint='checkpoint' applies to n_steps runs; with ts= use 'store' or 'reversible'")
+        return _run_at(parameters, static, x0, h, t0, _output_times(ts, t0, h), adjoint)
+    if n_steps is None:
+        raise InputError("integrate needs n_steps (the number of steps) or ts= (output times)")
+    n_steps = check_count(n_steps, "n_steps", 0)
+    if save_every is not None:
+        save_every = check_count(save_every, "save_every", 1)
+    return _run(parameters, static, x0, h, t0, n_steps, save_every, adjoint)
 
 
 def integrate_checkpointed(step, x0, h, n_steps: int, *, block: int | None = None):
@@ -143,15 +255,12 @@ def integrate_checkpointed(step, x0, h, n_steps: int, *, block: int | None = Non
 
     The steps run as ⌊n/B⌋ blocks of B (default ⌈√n⌉) under ``jax.checkpoint`` plus the
     remainder; the forward values are those of ``integrate`` (same merged sub-flows).
-    Not jitted: call it inside your own ``jit``/``grad``.
+    Not jitted: call it inside your own ``jit``/``grad`` (or use ``integrate(...,
+    adjoint="checkpoint")``).
     """
     n_steps = check_count(n_steps, "n_steps", 0)
-    if block is None:
-        block = max(1, math.isqrt(max(n_steps, 1)))
-    block = check_count(block, "block", 1)
+    if block is not None:
+        block = check_count(block, "block", 1)
     x0 = as_state(x0)
     h = jnp.asarray(step_size(h), dtype=float_dtype(x0))
-    blocks, rest = divmod(n_steps, block)
-    run_block = jax.checkpoint(lambda x: advance(step, x, h, block))
-    x = jax.lax.scan(lambda y, _: (run_block(y), None), x0, length=blocks)[0] if blocks else x0
-    return advance(step, x, h, rest) if rest else x
+    return advance_checkpointed(step, x0, h, n_steps, block)

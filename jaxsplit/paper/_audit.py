@@ -711,11 +711,11 @@ def claim_rem42(ctx):
                 "max_rel_casimir_error": float(c)}
     wall = {}
     for name, (step, _) in methods.items():  # a second, machine-dependent cost model: seconds per step
-        integrate(step, m0, 0.01, 100_000).block_until_ready()
+        integrate(step, m0, 0.01, 100_000).final.block_until_ready()
         best = math.inf
         for h in (0.02, 0.03):
             start = time.perf_counter()
-            integrate(step, m0, h, 100_000).block_until_ready()
+            integrate(step, m0, h, 100_000).final.block_until_ready()
             best = min(best, time.perf_counter() - start)
         wall[name] = best / 100_000 * 1e6
     ratios = [table["lie-trotter"][f"budget_{b}"]["global_error_T100"] / table["rk4"][f"budget_{b}"]["global_error_T100"]

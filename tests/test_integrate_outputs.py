@@ -1,0 +1,140 @@
+"""integrate's one result type, output at arbitrary times, and the three adjoints."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxsplit
+from jaxsplit import InputError
+from jaxsplit.core._integrate import compilations
+
+CASIMIR_TOL = 1e-13  # relative, states at output times (partial steps are Poisson maps)
+ACCURACY_FACTOR = 1.5  # error at output times vs the grid's own error (same scheme, same h)
+GRADIENT_RTOL = 1e-8  # reversible vs stored gradient, 1e5 steps (round-off of the rebuilt states)
+FD_RTOL = 1e-6
+
+BODY = jaxsplit.RigidBody(jnp.asarray(jaxsplit.PAPER_BODY))  # symmetric: exact solution known
+M0 = jnp.asarray(jaxsplit.PAPER_M0)
+STANDARD = jaxsplit.RigidBody(jnp.asarray(jaxsplit.STANDARD_CASE.inertia))
+SM0 = jnp.asarray(jaxsplit.STANDARD_CASE.m0)
+
+
+def test_one_result_type():
+    step = jaxsplit.splitting(STANDARD, "strang", "casimir")
+    plain = jaxsplit.integrate(step, SM0, 0.1, 100)
+    saved = jaxsplit.integrate(step, SM0, 0.1, 100, save_every=30)
+    assert isinstance(plain, jaxsplit.Solution) and isinstance(saved, jaxsplit.Solution)
+    np.testing.assert_array_equal(plain.final, saved.final)
+    np.testing.assert_array_equal(plain.x[0], SM0)
+    np.testing.assert_allclose(plain.t, [0.0, 10.0], atol=1e-12)
+    np.testing.assert_allclose(saved.t, [0.0, 3.0, 6.0, 9.0, 10.0], atol=1e-12)
+    assert (plain.n_steps, plain.scheme, plain.status) == (100, "strang", "ok")
+    assert float(plain.h) == 0.1
+    shifted = jaxsplit.integrate(step, SM0, 0.1, 100, t0=5.0)
+    np.testing.assert_allclose(shifted.t, [5.0, 15.0], atol=1e-12)
+    # vmap gives a batched Solution
+    batch = jax.vmap(lambda h: jaxsplit.integrate(step, SM0, h, 10))(jnp.array([0.1, 0.2]))
+    assert batch.final.shape == (2, 3) and batch.t.shape == (2, 2)
+    # a blow-up is reported, not hidden
+    blown = jaxsplit.integrate(lambda x, h: 1e200 * x, SM0, 0.1, 5)
+    assert blown.status == "nonfinite" and not bool(blown.finite)
+
+
+@pytest.fixture(scope="module")
+def outputs_case():
+    step = jaxsplit.splitting(BODY, "suzuki-5", "axes")  # axes split: not exact for this body
+    h, n = 0.05, 400
+    grid = jaxsplit.integrate(step, M0, h, n, save_every=1)
+    grid_error = float(jnp.max(jnp.abs(grid.x - jaxsplit.symmetric_solution(BODY, M0, grid.t))))
+    return step, h, n, grid_error
+
+
+def test_states_at_1000_random_times(outputs_case):
+    step, h, n, grid_error = outputs_case
+    rng = np.random.default_rng(0)
+    ts = np.sort(rng.uniform(0.0, h * n, 1000))
+    sol = jaxsplit.integrate(step, M0, h, ts=ts)
+    exact = jaxsplit.symmetric_solution(BODY, M0, sol.t)
+    error = np.max(np.abs(np.asarray(sol.x) - np.asarray(exact)), axis=1)
+    assert grid_error > 1e-12  # the comparison is not trivial
+    assert np.max(error) <= ACCURACY_FACTOR * grid_error, (np.max(error), grid_error)
+    c0 = float(M0 @ M0)
+    casimir = np.abs(np.sum(np.asarray(sol.x) ** 2, axis=1) / c0 - 1)
+    assert np.max(casimir) <= CASIMIR_TOL
+    # one compilation for a new set of times of the same length (and a new h)
+    before = compilations()
+    jaxsplit.integrate(step, M0, 0.04, ts=np.sort(rng.uniform(0.0, 20.0, 1000)))
+    assert compilations() == before
+    # outputs on the grid are the grid states
+    on_grid = jaxsplit.integrate(step, M0, h, ts=np.array([0.0, 1.0, 20.0]))
+    np.testing.assert_allclose(on_grid.final, jaxsplit.integrate(step, M0, h, n).final, atol=1e-14)
+
+
+def test_output_times_are_checked():
+    step = jaxsplit.splitting(BODY, "strang")
+    with pytest.raises(InputError, match="ordered"):
+        jaxsplit.integrate(step, M0, 0.1, ts=[1.0, 0.5])
+    with pytest.raises(InputError, match="ordered"):
+        jaxsplit.integrate(step, M0, -0.1, ts=[1.0])  # backwards run, forward time
+    with pytest.raises(InputError, match="finite"):
+        jaxsplit.integrate(step, M0, 0.1, ts=[0.5, np.nan])
+    with pytest.raises(InputError, match="either ts="):
+        jaxsplit.integrate(step, M0, 0.1, 10, ts=[0.5])
+    with pytest.raises(InputError, match="needs n_steps"):
+        jaxsplit.integrate(step, M0, 0.1)
+    back = jaxsplit.integrate(step, M0, -0.1, ts=[-0.25, -1.0])  # backwards: decreasing times
+    np.testing.assert_allclose(back.t, [-0.25, -1.0])
+
+
+def _loss(adjoint, n, steps=None):
+    def loss(inertia, m0):
+        step = jaxsplit.splitting(jaxsplit.RigidBody(inertia), "strang", "casimir", shift=1)
+        return jnp.sum(jaxsplit.integrate(step, m0, 0.01, n, adjoint=adjoint).final ** 2 * jnp.arange(1.0, 4.0))
+    return loss
+
+
+def test_adjoints_agree_over_1e5_steps():
+    args = (jnp.asarray(jaxsplit.STANDARD_CASE.inertia), SM0)
+    stored = jax.jit(jax.grad(_loss("store", 100_000), argnums=(0, 1)))(*args)
+    for adjoint in ("checkpoint", "reversible"):
+        got = jax.jit(jax.grad(_loss(adjoint, 100_000), argnums=(0, 1)))(*args)
+        for g, s in zip(got, stored):
+            assert float(jnp.max(jnp.abs(g - s)) / jnp.max(jnp.abs(s))) <= GRADIENT_RTOL, adjoint
+
+
+def test_reversible_memory_does_not_grow_with_the_step_count():
+    args = (jnp.asarray(jaxsplit.STANDARD_CASE.inertia), SM0)
+    sizes = {}
+    for adjoint in ("store", "reversible"):
+        for n in (1_000, 100_000):
+            compiled = jax.jit(jax.grad(_loss(adjoint, n))).lower(*args).compile()
+            sizes[adjoint, n] = compiled.memory_analysis().temp_size_in_bytes
+    assert sizes["reversible", 100_000] == sizes["reversible", 1_000]
+    assert sizes["store", 100_000] > 50 * sizes["store", 1_000]  # the stored adjoint does grow
+
+
+def test_reversible_gradient_at_output_times_matches_finite_differences():
+    step = jaxsplit.splitting(STANDARD, "suzuki-5", "casimir")
+    ts = jnp.array([0.37, 1.2, 3.05])
+
+    def loss(m0):
+        return jnp.sum(jaxsplit.integrate(step, m0, 0.1, ts=ts, adjoint="reversible").x[:, 0])
+
+    g = jax.grad(loss)(SM0)
+    eps = 1e-6
+    fd = jnp.stack([(loss(SM0.at[k].add(eps)) - loss(SM0.at[k].add(-eps))) / (2 * eps) for k in range(3)])
+    np.testing.assert_allclose(g, fd, rtol=FD_RTOL, atol=1e-9)
+
+
+def test_reversible_adjoint_is_refused_where_it_is_wrong():
+    with pytest.raises(InputError, match="time-symmetric scheme"):
+        jaxsplit.integrate(jaxsplit.splitting(STANDARD, "lie-trotter"), SM0, 0.1, 10, adjoint="reversible")
+    with pytest.raises(InputError, match="Composition"):
+        jaxsplit.integrate(jaxsplit.rk4(STANDARD), SM0, 0.1, 10, adjoint="reversible")
+    inner = jaxsplit.splitting(STANDARD, "strang")
+    with pytest.raises(InputError, match="exact group flows"):
+        jaxsplit.integrate(jaxsplit.compose([inner, *STANDARD.split("axes")], "strang"), SM0, 0.1, 10,
+                           adjoint="reversible")
+    with pytest.raises(InputError, match="adjoint must be one of"):
+        jaxsplit.integrate(inner, SM0, 0.1, 10, adjoint="recompute")
