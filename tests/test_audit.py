@@ -68,7 +68,8 @@ def test_cli_subset_end_to_end(tmp_path):
     assert report.index("](rem45_orbit.png)") > report.index("### rem4.5 — ")
     # numbers for a reader: no "None", no long mantissas (full precision stays in claims.json)
     assert "None" not in report
-    long_numbers = [x for x in re.findall(r"\d+\.\d+", report) if len(x.replace(".", "").lstrip("0")) > MAX_DIGITS]
+    digits = lambda x: len(x.replace(".", "").lstrip("0"))
+    long_numbers = [x for x in re.findall(r"\d+\.\d+", report) if digits(x) > MAX_DIGITS]
     assert not long_numbers
     # a second run refuses to overwrite; --force allows it
     assert main(["paper", "--out", str(out), "--claims", "stages"]) == 2
@@ -165,7 +166,8 @@ def test_tangent_block_of_lie_trotter_at_an_equilibrium_is_area_preserving():
 
 
 def _row(exact, status, imag=0.0, product=0.0):
-    return {"exact flow": exact, "status": status, "max |Im λ| just past": imag, "|λ1·λ2 − 1| just past": product}
+    return {"exact flow": exact, "status": status, "max |Im λ| just past": imag,
+            "|λ1·λ2 − 1| just past": product}
 
 
 def test_departure_scenario_needs_a_real_pair_with_product_one():

@@ -72,7 +72,8 @@ def audit_paper(out_dir, claims=None, *, figures: bool = True, force: bool = Fal
         timings["+".join(ids)] = time.perf_counter() - start
         if os.environ.get("JAXSPLIT_AUDIT_VERBOSE"):
             print(f"{'+'.join(ids)}: {timings['+'.join(ids)]:.1f} s", flush=True)
-        records += [_jsonable(r) for r in (result if isinstance(result, list) else [result]) if r["id"] in wanted]
+        results = result if isinstance(result, list) else [result]
+        records += [_jsonable(r) for r in results if r["id"] in wanted]
         drawn.update({cid: data for cid, data in (figure_data or {}).items() if cid in wanted})
     order = {c: i for i, c in enumerate(CLAIM_IDS)}
     records.sort(key=lambda r: order[r["id"]])

@@ -23,7 +23,8 @@ def samples(dim, seed, n=N_SAMPLES, scale=1.0):
 
 def log_steps(seed, n=N_SAMPLES, lo=H_RANGE[0], hi=H_RANGE[1]):
     """Step sizes log-uniform in [lo, hi]."""
-    return jnp.exp(jax.random.uniform(jax.random.PRNGKey(seed), (n,), minval=math.log(lo), maxval=math.log(hi)))
+    u = jax.random.uniform(jax.random.PRNGKey(seed), (n,), minval=math.log(lo), maxval=math.log(hi))
+    return jnp.exp(u)
 
 
 def max_defect(defect: Callable, xs, hs) -> float:

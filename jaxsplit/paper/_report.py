@@ -7,15 +7,17 @@ import re
 
 from ._records import ORDER_TOL, ROUND_OFF, VERDICTS
 
-_SPACE = re.compile(r"(?<![\u0370-\u03ff])_")  # underscores -> spaces, except Greek subscripts: Π_0
+_SUBSCRIPT = re.compile(r"(?:(?<=[\u0370-\u03ff])|(?<=\b[A-Z]))_(?=[^\W_](?![^\W_]))")  # Π_0, ω_k, X_F
 _LABELS = (("condition_2_7", "(2.7)"),)  # evidence keys spelt for code -> for a reader
 
 
 def _label(key) -> str:
+    """An evidence key for a reader: underscores become spaces, except in subscripts."""
     text = str(key)
     for old, new in _LABELS:
         text = text.replace(old, new)
-    return _SPACE.sub(" ", text)
+    keep = {m.start() for m in _SUBSCRIPT.finditer(text)}
+    return "".join(" " if c == "_" and i not in keep else c for i, c in enumerate(text))
 
 
 def _esc(text) -> str:
@@ -23,8 +25,8 @@ def _esc(text) -> str:
     return str(text).replace("|", "\\|")
 
 
-def number(v) -> str:
-    """A number for a reader: integers as such, others to 3 significant digits, exponents short."""
+def number(v, digits=3) -> str:
+    """A number for a reader: integers as such, others to ``digits`` significant digits, short exponents."""
     if isinstance(v, bool):
         return "yes" if v else "no"
     if isinstance(v, int):
@@ -33,7 +35,7 @@ def number(v) -> str:
         return str(v)
     if v == int(v) and abs(v) < 1e4:
         return str(int(v))
-    mantissa, _, exponent = f"{v:.3g}".partition("e")
+    mantissa, _, exponent = f"{v:.{digits}g}".partition("e")
     return f"{mantissa}e{int(exponent)}" if exponent else mantissa
 
 
@@ -60,8 +62,8 @@ def _evidence_lines(ev, depth=0):
         if isinstance(v, dict) and v and all(isinstance(x, dict) and all(map(_is_scalar, x.values()))
                                              for x in v.values()):
             cols = list(dict.fromkeys(c for row in v.values() for c in row))  # a table: rows of scalars
-            lines += [f"{indent}- **{_label(k)}**:", "", "| | " + " | ".join(_esc(_label(c)) for c in cols) + " |",
-                      "|---" * (len(cols) + 1) + "|"]
+            header = "| | " + " | ".join(_esc(_label(c)) for c in cols) + " |"
+            lines += [f"{indent}- **{_label(k)}**:", "", header, "|---" * (len(cols) + 1) + "|"]
             lines += [f"| {_esc(_label(name))} | " + " | ".join(_esc(cell(row.get(c))) for c in cols) + " |"
                       for name, row in v.items()]
             lines.append("")
@@ -79,12 +81,12 @@ def _evidence_lines(ev, depth=0):
 def report_markdown(records, figures, timings, section_of) -> str:
     """records: the claim records; figures: {claim id: (file name, caption)}; timings: {claim
     function: seconds}; section_of: {claim id: the paper section's title}."""
-    lines = ["# Audit of the seed paper (Hedrea, Lie–Trotter integrator for the symmetric free rigid body)", "",
-             ("Every verdict below was computed from the measurements at run time by `jaxsplit paper` "
-              f"(`jaxsplit.paper`); structure defects <= {ROUND_OFF:g} count as round-off, measured orders must lie "
-              f"within {ORDER_TOL:g} of the claimed ones. The text under each heading explains the measurement; "
-              "the verdict comes only from the numbers listed. Full precision: `claims.json`."), "",
-             "Verdicts and their rules:", ""]
+    intro = (f"Every verdict below was computed from the measurements at run time by `jaxsplit paper` "
+             f"(`jaxsplit.paper`); structure defects <= {ROUND_OFF:g} count as round-off, measured orders "
+             f"must lie within {ORDER_TOL:g} of the claimed ones. The text under each heading explains the "
+             "measurement; the verdict comes only from the numbers listed. Full precision: `claims.json`.")
+    title = "# Audit of the seed paper (Hedrea, Lie–Trotter integrator for the symmetric free rigid body)"
+    lines = [title, "", intro, "", "Verdicts and their rules:", ""]
     lines += [f"- **{word}**: {rule}" for word, rule in VERDICTS.items()]
     lines += ["", "| id | verdict | claim |", "|---|---|---|"]
     lines += [f"| {r['id']} | **{r['verdict']}** | {_esc(r['statement'])} |" for r in records]

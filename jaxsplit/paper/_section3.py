@@ -63,7 +63,8 @@ def _ex31_measure(ctx):
 
         def one(x):
             change = jnp.abs(system.hamiltonian(step(x, h)) - system.hamiltonian(x))
-            return poisson_defect(step, system.poisson_matrix, x, h), change / (1 + jnp.abs(system.hamiltonian(x)))
+            relative_change = change / (1 + jnp.abs(system.hamiltonian(x)))
+            return poisson_defect(step, system.poisson_matrix, x, h), relative_change
 
         d, e = jax.vmap(one)(xs)
         return jnp.max(d), jnp.max(e)
@@ -79,8 +80,8 @@ def _ex31_measure(ctx):
 
 
 def claim_ex31_i(ctx):
-    statement = ("Ex. 3.1(i): for Π = [[0, x2], [−x2, 0]], H = Ax1 + Bx2 + C, the 1-stage RK method is Poisson "
-                 "iff h = 1/(2bA − aA), 2bA − aA ≠ 0")
+    statement = ("Ex. 3.1(i): for Π = [[0, x2], [−x2, 0]], H = Ax1 + Bx2 + C, the 1-stage RK method is "
+                 "Poisson iff h = 1/(2bA − aA), 2bA − aA ≠ 0")
     cases, defect, _, same = _ex31_measure(ctx)
     on_paper_h = np.array([(2 * b - a) * big_a != 0 and abs(h - 1 / ((2 * b - a) * big_a)) < 1e-15
                            for big_a, big_b, a, b, h in cases])
@@ -96,10 +97,10 @@ def claim_ex31_i(ctx):
         verdict = "confirmed"
     else:
         verdict = "refuted"
-    notes = ("f(x) = (Bx2, −Ax2) is linear, so any RK step is x ↦ R x with R upper triangular, R11 = 1: "
-             "det R = R22 and (3.2) reads det(R) x2 = (Rx)2 — true for every h, a, b. The method is Poisson "
-             "unconditionally; the printed condition is not necessary. The control map x2 ↦ x2 + h x2² shows the "
-             "check does detect non-Poisson maps of this structure.")
+    notes = ("f(x) = (Bx2, −Ax2) is linear, so any RK step is x ↦ R x with R upper triangular, R11 = 1: det "
+             "R = R22 and (3.2) reads det(R) x2 = (Rx)2 — true for every h, a, b. The method is Poisson "
+             "unconditionally; the printed condition is not necessary. The control map x2 ↦ x2 + h x2² "
+             "shows the check does detect non-Poisson maps of this structure.")
     return record("ex3.1-i", statement, verdict, ev, notes), None
 
 
@@ -111,9 +112,9 @@ def claim_ex31_ii(ctx):
     statement = "Ex. 3.1(ii): the 1-stage RK method conserves H = Ax1 + Bx2 + C iff A = 0 or B = 0"
     cases, _, energy, _ = _ex31_measure(ctx)
     both = np.array([big_a != 0 and big_b != 0 for big_a, big_b, *_ in cases])
-    ev = {"cases_A_and_B_nonzero": int(both.sum()), "cases_A_or_B_zero": int((~both).sum()),
-          "max_rel_energy_change_A_B_nonzero": float(energy[both].max()),
-          "max_rel_energy_change_A_or_B_zero": float(energy[~both].max())}
+    ev = {"cases_with_A≠0_and_B≠0": int(both.sum()), "cases_with_A=0_or_B=0": int((~both).sum()),
+          "max_rel_energy_change_when_A≠0_and_B≠0": float(energy[both].max()),
+          "max_rel_energy_change_when_A=0_or_B=0": float(energy[~both].max())}
     verdict = "confirmed" if (holds(energy[~both].max()) and not holds(energy[both].min())) else "refuted"
     notes = ("∇H·f = A·Bx2 + B·(−Ax2) = 0 identically: H is a LINEAR first integral, and every RK method "
              "(any a, b, h) preserves linear invariants exactly. Energy is conserved for all A, B.")
@@ -142,7 +143,8 @@ def claim_ex31_iii_iv(ctx):
         energy[name] = dict(zip(columns, e_row.tolist()))
     worst_poisson = max(v for row in poisson.values() for v in row.values())
     worst_energy = max(v for row in energy.values() for v in row.values())
-    r3 = record("ex3.1-iii", "Ex. 3.1(iii): the Gauss–Legendre integrator is a Poisson integrator for Example 3.1",
+    r3 = record("ex3.1-iii",
+                "Ex. 3.1(iii): the Gauss–Legendre integrator is a Poisson integrator for Example 3.1",
                 "confirmed" if holds(worst_poisson) else "refuted",
                 {"max_poisson_defect": poisson, "h_range": list(H_RANGE)},
                 "true, and for the reason found in ex3.1-i: every RK method is Poisson here")
@@ -172,10 +174,11 @@ def claim_prop32(ctx):
         jnp.full(64, 0.1))
     verdict = "confirmed" if all(rows[n]["poisson"] for n in GAUSS_LEGENDRE) else "refuted"
     return record("prop3.2", statement, verdict, ev,
-                   "the hypothesis matters: for the Lie–Poisson Π(m) = hat(m) of an asymmetric body the midpoint "
-                   "rule is not Poisson"), None
+                   "the hypothesis matters: for the Lie–Poisson Π(m) = hat(m) of an asymmetric body the "
+                   "midpoint rule is not Poisson"), None
 
 
 # (ids a function records, function), in the paper's order
-CLAIMS = ((("ex3.1-i",), claim_ex31_i), (("ex3.1-ii",), claim_ex31_ii), (("ex3.1-iii", "ex3.1-iv"), claim_ex31_iii_iv),
-          (("prop3.1",), claim_prop31), (("prop3.2",), claim_prop32))
+CLAIMS = ((("ex3.1-i",), claim_ex31_i), (("ex3.1-ii",), claim_ex31_ii),
+          (("ex3.1-iii", "ex3.1-iv"), claim_ex31_iii_iv), (("prop3.1",), claim_prop31),
+          (("prop3.2",), claim_prop32))

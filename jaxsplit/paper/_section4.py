@@ -57,8 +57,8 @@ _CLASSICAL = ("explicit-euler", "rk4", "implicit-midpoint", "trapezoid")
 
 
 def claim_thm41(ctx):
-    statement = ("Thm. 4.1: the Lie–Trotter integrator of the symmetric free rigid body (I1 = I2) is Poisson; "
-                 "its matrix form is (4.3) m⁽ⁿ⁺¹⁾ = M·N·P·m⁽ⁿ⁾")
+    statement = ("Thm. 4.1: the Lie–Trotter integrator of the symmetric free rigid body (I1 = I2) is "
+                 "Poisson; its matrix form is (4.3) m⁽ⁿ⁺¹⁾ = M·N·P·m⁽ⁿ⁾")
     body = paper_body()
     xs = random_unit_states(jax.random.PRNGKey(51), N_SAMPLES)
     hs = log_steps(52)
@@ -66,11 +66,12 @@ def claim_thm41(ctx):
     printed, seq = formula_4_3(body), formula_4_3_sequential(body)
 
     def sample(x, h):  # everything measured at one (x, h): ONE compilation
-        return (poisson_defect(lt, hat, x, h), poisson_defect(adj, hat, x, h), poisson_defect(printed, hat, x, h),
-                poisson_defect(seq, hat, x, h), jnp.max(jnp.abs(seq(x, h) - adj(x, h))),
-                jnp.abs(jnp.sum(printed(x, h) ** 2) - jnp.sum(x**2)))
+        defects = tuple(poisson_defect(step, hat, x, h) for step in (lt, adj, printed, seq))
+        casimir_change = jnp.abs(jnp.sum(printed(x, h) ** 2) - jnp.sum(x**2))
+        return (*defects, jnp.max(jnp.abs(seq(x, h) - adj(x, h))), casimir_change)
 
-    d_lt, d_adj, d_printed, d_seq, seq_vs_adj, cas = (scalar(jnp.max(v)) for v in jax.jit(jax.vmap(sample))(xs, hs))
+    measured = jax.jit(jax.vmap(sample))(xs, hs)
+    d_lt, d_adj, d_printed, d_seq, seq_vs_adj, cas = (scalar(jnp.max(v)) for v in measured)
     ev = {"body": list(PAPER_BODY), "samples": N_SAMPLES, "h_range": list(H_RANGE),
           "composition_(4.1)_lie-trotter_max_defect": d_lt,
           "composition_(4.1)_lie-trotter-adjoint_max_defect": d_adj,
@@ -93,12 +94,13 @@ def claim_thm41(ctx):
     p_curve, lt_curve, cl_curves = (np.asarray(v) for v in jax.jit(jax.vmap(per_h))(grid))
     ev["formula_(4.3)_as_printed_defect_vs_h"] = {f"{scalar(h):g}": float(d) for h, d in zip(grid, p_curve)}
     ev["formula_(4.3)_as_printed_growth_exponent"] = growth_exponent(grid, p_curve)
-    curves = {"(4.3) as printed": (np.asarray(grid), p_curve), "lie-trotter (4.1)": (np.asarray(grid), lt_curve)}
+    hs_grid = np.asarray(grid)
+    curves = {"(4.3) as printed": (hs_grid, p_curve), "lie-trotter (4.1)": (hs_grid, lt_curve)}
     others = {}
     for name, d in zip(_CLASSICAL, cl_curves.T):
         curves[f"{name} (asymmetric body)"] = (np.asarray(grid), d)
-        others[name] = {"defect_h0.1": float(d[2]),
-                        "growth_exponent": growth_exponent(grid, d) if np.sum(d > 1e-13) >= 2 else "round-off"}
+        growth = growth_exponent(grid, d) if np.sum(d > 1e-13) >= 2 else "round-off"
+        others[name] = {"defect_h0.1": float(d[2]), "growth_exponent": growth}
     ev["classical_methods_on_the_asymmetric_standard_body"] = others
     composition_ok = holds(d_lt) and holds(d_adj)
     if composition_ok and holds(d_printed):
@@ -107,16 +109,17 @@ def claim_thm41(ctx):
         verdict = "corrected"
     else:
         verdict = "refuted"
-    notes = ("The composition of exact flows (4.1) is Poisson to round-off. Formula (4.3) as printed takes all three "
-             "angles from m⁽ⁿ⁾; then N and M rotate by angles not computed from the state they act on, the map is "
-             "no longer a composition of flows and it is not Poisson (it still keeps |m|). Correct (4.3): "
-             "m⁽ⁿ⁺¹⁾ = M(θ1(m'')) N(θ2(m')) P(θ3(m⁽ⁿ⁾)) m⁽ⁿ⁾, m' = P m⁽ⁿ⁾, m'' = N m' (P acts first, i.e. the "
-             "adjoint ordering of (4.1)).")
+    notes = ("The composition of exact flows (4.1) is Poisson to round-off. Formula (4.3) as printed takes "
+             "all three angles from m⁽ⁿ⁾; then N and M rotate by angles not computed from the state they "
+             "act on, the map is no longer a composition of flows and it is not Poisson (it still keeps "
+             "|m|). Correct (4.3): m⁽ⁿ⁺¹⁾ = M(θ1(m'')) N(θ2(m')) P(θ3(m⁽ⁿ⁾)) m⁽ⁿ⁾, m' = P m⁽ⁿ⁾, m'' = N m' "
+             "(P acts first, i.e. the adjoint ordering of (4.1)).")
     return record("thm4.1", statement, verdict, ev, notes), {"thm4.1": curves}
 
 
 def claim_prop42(ctx):
-    statement = "Prop. 4.2: restricted to the coadjoint orbits (O_k, ω_k) the Lie–Trotter integrator is symplectic"
+    statement = ("Prop. 4.2: restricted to the coadjoint orbits (O_k, ω_k) the Lie–Trotter integrator is "
+                 "symplectic")
     body = paper_body()
     step = splitting(body, "lie-trotter")
     ev = {}
@@ -130,8 +133,9 @@ def claim_prop42(ctx):
     # control: RK4 projected back onto the sphere keeps the orbit but not the form
     rk = runge_kutta(body, tableaus["rk4"])
     proj = lambda m, h: rk(m, h) * jnp.linalg.norm(m) / jnp.linalg.norm(rk(m, h))
+    control_states = random_unit_states(jax.random.PRNGKey(63), 64)
     ev["control_projected_RK4_h0.5"] = max_defect(lambda x, h: orbit_symplectic_defect(proj, x, h),
-                                                 random_unit_states(jax.random.PRNGKey(63), 64), jnp.full(64, 0.5))
+                                                 control_states, jnp.full(64, 0.5))
 
     # the printed ω_k = (1/k)(m2 dm1∧dm3 − m3 dm1∧dm2 − m1 dm2∧dm3) against the bracket {F, G}
     def ratio(m, a, b):
@@ -147,9 +151,9 @@ def claim_prop42(ctx):
     ev["printed_ω_k(X_F,X_G)/{F,G}_at_radius_2"] = [round(scalar(r), 12) for r in printed_ratio[:3]]
     ev["KKS_−m·(u×v)/|m|²_(X_F,X_G)/{F,G}_at_radius_2"] = [round(scalar(r), 12) for r in kks_ratio[:3]]
     ok = all(holds(v) for k, v in ev.items() if k.startswith("max_KKS"))
-    notes = ("Measured with ω_m(u,v) = −m·(u×v)/|m|² (the KKS form: ω(X_F, X_G) = {F, G}). The printed ω_k has 1/k "
-             "where 1/k² is needed (ratio k, measured at k = 2); a constant factor on each orbit does not change "
-             "which maps preserve it, so the claim stands.")
+    notes = ("Measured with ω_m(u,v) = −m·(u×v)/|m|² (the KKS form: ω(X_F, X_G) = {F, G}). The printed ω_k "
+             "has 1/k where 1/k² is needed (ratio k, measured at k = 2); a constant factor on each orbit "
+             "does not change which maps preserve it, so the claim stands.")
     return record("prop4.2", statement, "confirmed" if ok else "refuted", ev, notes), None
 
 
@@ -174,16 +178,18 @@ def _orders(ctx):
     asym = RigidBody(jnp.asarray(STANDARD_CASE.inertia))
     ref = jnp.asarray(STANDARD_CASE.reference)
     for name, claimed, start in _ORDER_RUNS:
-        hs, errs = global_errors(roll(splitting(asym, name)), jnp.asarray(STANDARD_CASE.m0), STANDARD_CASE.t_end,
-                                 ladder(start, 8.0, 6), ref)
+        step, m0 = roll(splitting(asym, name)), jnp.asarray(STANDARD_CASE.m0)
+        hs, errs = global_errors(step, m0, STANDARD_CASE.t_end, ladder(start, 8.0, 6), ref)
         out[name]["measured_asymmetric"] = fit_order(hs, errs).order
     ctx["orders"] = out
     return out
 
 
 def _order_evidence(orders, names):
-    return {n: {"claimed_order": orders[n]["claimed"], "measured_symmetric_body": round(orders[n]["measured"], 3),
-                "measured_asymmetric_standard_case": round(orders[n]["measured_asymmetric"], 3)} for n in names}
+    return {n: {"claimed_order": orders[n]["claimed"],
+                "measured_symmetric_body": round(orders[n]["measured"], 3),
+                "measured_asymmetric_standard_case": round(orders[n]["measured_asymmetric"], 3)}
+            for n in names}
 
 
 def _order_figure(orders, names, cid):
@@ -202,7 +208,8 @@ def claim_order2(ctx):
                  "second order")
     orders, names = _orders(ctx), ("lie-trotter", "strang")
     ev = _order_evidence(orders, names)
-    ev["method"] = "max-norm global error at T = 10 over 6 step sizes (8x range), log-log fit in the window (1e-13, 1e-4)"
+    ev["method"] = ("max-norm global error at T = 10 over 6 step sizes (8x range), log-log fit in the window "
+                    "(1e-13, 1e-4)")
     verdict = "confirmed" if _orders_ok(orders, names) else "refuted"
     return record("order2", statement, verdict, ev), _order_figure(orders, names, "order2")
 
@@ -214,8 +221,8 @@ def _paper_weights(n):
 
 
 def claim_order4(ctx):
-    statement = ("§4: φ⁴_t = φ²_{x1 t} ∘ φ²_{x0 t} ∘ φ²_{x1 t}, x0 = 2^{1/3}/(2^{1/3} − 2), x1 = 1/(2 − 2^{1/3}), "
-                 "is fourth order")
+    statement = ("§4: φ⁴_t = φ²_{x1 t} ∘ φ²_{x0 t} ∘ φ²_{x1 t}, x0 = 2^{1/3}/(2^{1/3} − 2), x1 = "
+                 "1/(2 − 2^{1/3}), is fourth order")
     orders, names = _orders(ctx), ("triple-jump-4",)
     x0, x1 = _paper_weights(1)
     coef = triple_jump(4).coefficients
@@ -225,7 +232,8 @@ def claim_order4(ctx):
     ev["|2x1³ + x0³|"] = abs(2 * x1**3 + x0**3)
     ev["max_|paper − core coefficients|"] = max(abs(a - b) for a, b in zip((x1, x0, x1), coef))
     ok = _orders_ok(orders, names) and ev["|2x1³ + x0³|"] <= 1e-14 and ev["|2x1 + x0 − 1|"] <= 1e-14
-    return record("order4", statement, "confirmed" if ok else "refuted", ev), _order_figure(orders, names, "order4")
+    verdict = "confirmed" if ok else "refuted"
+    return record("order4", statement, verdict, ev), _order_figure(orders, names, "order4")
 
 
 def claim_order2n2(ctx):
@@ -263,17 +271,18 @@ def claim_stages(ctx):
         rows[f"order {2 * n}"] = row
     equal_everywhere = [key for key, v in k_matches.items() if all(v)]
     total_keys = [key for key in equal_everywhere if key.startswith("subflows")]
-    ev = {"counts": rows, "counts_equal_to_1+3^(n-1)_for_all_n": equal_everywhere}
+    readable = [key.replace("_", " ") for key in equal_everywhere]
+    ev = {"counts": rows, "counts_equal_to_1+3^(n-1)_for_all_n": readable}
     if strang_ok and total_keys:
         verdict = "confirmed"
     elif strang_ok:
         verdict = "corrected"
     else:
         verdict = "refuted"
-    notes = ("3^{n−1} Strang steps is right. k = 1 + 3^{n−1} is not the number of sub-flows: a two-piece splitting "
-             "needs 2·3^{n−1} + 1 flows per step after merging (2·3^{n−1} in a long run), a three-piece one "
-             "4·3^{n−1} + 1. The only count equal to 1 + 3^{n−1} is the number of flows of the outer piece "
-             "of a two-piece splitting.")
+    notes = ("3^{n−1} Strang steps is right. k = 1 + 3^{n−1} is not the number of sub-flows: a two-piece "
+             "splitting needs 2·3^{n−1} + 1 flows per step after merging (2·3^{n−1} in a long run), a "
+             "three-piece one 4·3^{n−1} + 1. The only count equal to 1 + 3^{n−1} is the number of flows "
+             "of the outer piece of a two-piece splitting.")
     return record("stages", statement, verdict, ev, notes), None
 
 
