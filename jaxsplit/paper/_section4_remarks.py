@@ -87,7 +87,7 @@ def claim_rem41(ctx):
     verdict = "confirmed" if energy > INVARIANT_FLOOR else "refuted"
     notes = (f"Three-piece Lie–Trotter (4.1) at h = {lt['h']:g}: the energy error reaches "
              f"{number(energy, 2)} and stays bounded (maxima of the two halves of the run in ratio "
-             f"{number(halves, 3)}; curve in the figure under rem4.2), the Casimir stays at round-off "
+             f"{halves:.2f}; curve in the figure under rem4.2), the Casimir stays at round-off "
              f"({number(casimir, 1)}). With the "
              "Casimir-shifted split H − C/I1 = ½(1/I3 − 1/I1) m3² the symmetric body has ONE piece and "
              f"Lie–Trotter is the exact flow, hence energy-preserving (measured {number(cas_err, 1)}).")
@@ -150,7 +150,7 @@ def _crossover_sentence(invariant, lt_amplitude, halves, rk_final, crossing, t_e
         lt = f"Lie–Trotter's round-off level {number(lt_amplitude, 2)}"
     else:
         lt = (f"Lie–Trotter's bounded {number(lt_amplitude, 2)} (maxima of the two halves of the run in "
-              f"ratio {number(halves, 3)})")
+              f"ratio {halves:.2f})")
     grows = f"{invariant}: RK4's error grows like t^{p:.2f} to {number(rk_final, 2)} at T = {t_end:g}"
     if how == "measured":
         return f"{grows} and exceeds {lt} from t = {number(when, 3)} on (measured)."
@@ -158,8 +158,8 @@ def _crossover_sentence(invariant, lt_amplitude, halves, rk_final, crossing, t_e
         return (f"{invariant}: RK4's error does not grow (fitted t^{p:.2f}) and stays below {lt}: "
                 "no crossover.")
     return (f"{grows}, {number(lt_amplitude / rk_final, 2)} times below {lt}. If that power law (fitted on t "
-            f"≥ {DRIFT_FIT_FROM * t_end:g}) continues and Lie–Trotter's error stays bounded, RK4's overtakes "
-            f"it at t ≈ {number(when, 2)} (extrapolated).")
+            f"≥ {DRIFT_FIT_FROM * t_end:g}) continues and Lie–Trotter's error stays bounded, RK4's error "
+            f"overtakes it at t ≈ {number(when, 2)} (extrapolated).")
 
 
 def _equal_cost_table(body, m0, t_end, budgets):
