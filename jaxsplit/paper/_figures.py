@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 
+from ._records import ROUND_OFF
 from ._report import number
 
 DPI = 110
@@ -46,7 +47,7 @@ def _thm41(curves):
     fig, ax = _plt().subplots(figsize=(6, 4))
     for label, (hs, ds) in curves.items():
         ax.loglog(hs, np.maximum(ds, 1e-17), "o-", ms=3, label=label)
-    ax.axhline(1e-12, color="k", lw=0.6, ls=":")
+    ax.axhline(ROUND_OFF, color="k", lw=0.6, ls=":")
     ax.set_xlabel("h")
     ax.set_ylabel("max Poisson defect")
     ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.02, 0.5))
