@@ -34,13 +34,12 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import diffrax  # noqa: E402
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
-from _common import aot, fmt, interleaved, machine_info, paired_ratio, ready  # noqa: E402
+import diffrax
+import jax.numpy as jnp
+from _common import aot, fmt, interleaved, machine_info, paired_ratio, ready
 
-import jaxsplit  # noqa: E402
-import jaxsplit.diffrax as jd  # noqa: E402
+import jaxsplit
+import jaxsplit.diffrax as jd
 
 RESULTS = Path(__file__).resolve().parent / "results"
 CASE = jaxsplit.STANDARD_CASE
@@ -182,8 +181,8 @@ def main(argv=None):
     out["adaptive"] = adaptive(t_end)
     out["info"]["versions"]["diffrax"] = diffrax.__version__
 
-    lines = [f"# diffrax overhead ({out['info']['date_utc']})", "", f"`{command}`; {out['info']['machine']}; "
-             f"git {out['info']['git']}; diffrax {diffrax.__version__}, jax {jax.__version__}.", "",
+    lines = [f"# diffrax overhead ({out['info']['date_utc']})", "", (f"`{command}`; {out['info']['machine']}; "
+              f"git {out['info']['git']}; diffrax {diffrax.__version__}, jax {jax.__version__}."), "",
              "## (a) Wall time, diffrax vs integrate (ratio = median of per-round ratios)", "",
              "| scheme | output | steps | diffrax | integrate | ratio | compile diffrax / integrate | max diff |",
              "|---|---|---|---|---|---|---|---|"]
@@ -201,8 +200,8 @@ def main(argv=None):
     lines += ["", "## (d) Final state, diffrax vs integrate, by time grid", "", "| step | max diff |", "|---|---|"]
     lines += [f"| {k} | {v:.1e} |" for k, v in out["time_grid"].items()]
     a = out["adaptive"]
-    lines += ["", f"## (e) Adaptive steps, Strang, T = {a['T']:g} ({a['accepted_steps']} accepted, "
-              f"{a['rejected_steps']} rejected)", "",
+    lines += ["", (f"## (e) Adaptive steps, Strang, T = {a['T']:g} ({a['accepted_steps']} accepted, "
+                   f"{a['rejected_steps']} rejected)"), "",
               "| run | max energy error | energy error at T | Casimir drift |", "|---|---|---|---|"]
     for name in ("HalfSolver + PID(rtol=atol=1e-4)", "fixed steps, same count"):
         r = a[name]

@@ -49,8 +49,8 @@ def _api_page(area: str, names: list[str]) -> str:
 
 
 def _api_index(areas: dict[str, list[str]]) -> str:
-    lines = ["# API reference", "", "Every public name, by the package that defines it "
-             "(generated from `jaxsplit/__init__.py`).", ""]
+    lines = ["# API reference", "", ("Every public name, by the package that defines it "
+                                     "(generated from `jaxsplit/__init__.py`)."), ""]
     for area, names in areas.items():
         lines.append(f"* [{AREAS[area][0]}]({area}.md): " + ", ".join(f"`{n}`" for n in names))
     lines.append("* [diffrax](diffrax.md): `jaxsplit.diffrax` (optional extra): " + ", ".join(
@@ -70,9 +70,9 @@ def _scheme_table() -> str:
     import jaxsplit
     from jaxsplit.core._compose import merge, word
 
-    lines = ["# Schemes", "", "Generated from the registry (`jaxsplit.schemes`) when the site is built. "
-             "Sub-flows per step are counted after merging adjacent same-piece rotations, on two and "
-             "three pieces (partitioned schemes take exactly two).", "",
+    lines = ["# Schemes", "", ("Generated from the registry (`jaxsplit.schemes`) when the site is built. "
+                               "Sub-flows per step are counted after merging adjacent same-piece rotations, "
+                               "on two and three pieces (partitioned schemes take exactly two)."), "",
              "| name | form | order | stages | sub-flows (2 pieces) | sub-flows (3 pieces) | source |",
              "|---|---|---|---|---|---|---|"]
     for name in jaxsplit.schemes:

@@ -19,7 +19,8 @@ def mkdocs_build(config: pathlib.Path, site: pathlib.Path, env=None):
     """(exit code, output, seconds) of ``mkdocs build --strict``."""
     start = time.perf_counter()
     run = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-f", str(config), "-d", str(site)],
-                         capture_output=True, text=True, env=dict(os.environ, NO_MKDOCS_2_WARNING="1", **(env or {})),
+                         check=False, capture_output=True, text=True,
+                         env=dict(os.environ, NO_MKDOCS_2_WARNING="1", **(env or {})),
                          cwd=config.parent, timeout=600)
     return run.returncode, run.stdout + run.stderr, time.perf_counter() - start
 
