@@ -15,7 +15,9 @@ axis 1). Side by side in one process, repetitions interleaved round-robin (``_co
 (d) the time grid: final-state difference diffrax vs integrate at a dyadic h (grids equal)
     and at h = 0.1 (diffrax's grid t0 + (t1 - t0) k / n differs from k h by ulps);
 (e) adaptive steps: ``diffrax.HalfSolver(jd.Splitting)`` with a PID controller over T = 1000,
-    energy and Casimir drift against fixed steps of the same average size.
+    energy and Casimir drift against fixed steps of the same average size;
+(f) diffrax's own cost of ``SaveAt(ts=)``: ``diffrax.Euler`` on a linear ODE, same steps, final
+    state only against 50 output times (no jaxsplit involved).
 
     python benchmarks/diffrax_overhead.py            # full run (~2 min on 2 shared cores)
     python benchmarks/diffrax_overhead.py --quick    # smoke mode
@@ -165,6 +167,20 @@ def adaptive(t_end: float) -> dict:
             "HalfSolver + PID(rtol=atol=1e-4)": energy(sol.ys), "fixed steps, same count": energy(fixed.ys)}
 
 
+def saveat_cost(n: int, repeats: int) -> dict:
+    term = diffrax.ODETerm(lambda t, y, args: jnp.stack([y[1], -y[0], 0 * y[2]]))
+    ts = jnp.linspace(0.0, 10.0, 50)
+    runs = {}
+    for name, saveat in (("final state", diffrax.SaveAt(t1=True)), ("50 output times", diffrax.SaveAt(ts=ts))):
+        def run(y, saveat=saveat):
+            return diffrax.diffeqsolve(term, diffrax.Euler(), 0.0, 10.0, 10.0 / n, y, saveat=saveat, max_steps=n).ys
+        compiled, _ = aot(run, M0)
+        runs[name] = ready(compiled, M0)
+    times = interleaved(runs, repeats)
+    return {"steps": n, **{k: statistics.median(v) for k, v in times.items()},
+            "ratio": paired_ratio(times, "50 output times", "final state")}
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="smoke mode: fewer steps and repeats")
@@ -179,6 +195,7 @@ def main(argv=None):
     out["time_grid"] = time_grid()
     log("adaptive")
     out["adaptive"] = adaptive(t_end)
+    out["saveat_cost"] = saveat_cost(n, repeats)
     out["info"]["versions"]["diffrax"] = diffrax.__version__
 
     lines = [f"# diffrax overhead ({out['info']['date_utc']})", "", (f"`{command}`; {out['info']['machine']}; "
@@ -207,6 +224,11 @@ def main(argv=None):
         r = a[name]
         lines.append(f"| {name} | {r['max_energy_error']:.1e} | {r['energy_error_at_end']:.1e} | "
                      f"{r['casimir_drift']:.1e} |")
+    c = out["saveat_cost"]
+    lines += ["", f"## (f) diffrax's own SaveAt(ts) cost: diffrax.Euler, {c['steps']} steps", "",
+              "| output | time |", "|---|---|",
+              f"| final state | {fmt(c['final state'])} |", f"| 50 output times | {fmt(c['50 output times'])} |",
+              f"| ratio | **{c['ratio']:.1f}** |"]
     stem = "diffrax_overhead" + ("-quick" if args.quick else "")
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / f"{stem}.json").write_text(json.dumps(out, indent=1))
