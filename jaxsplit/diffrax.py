@@ -10,7 +10,7 @@ Optional extra (``pip install -e ".[diffrax]"``); the core package never imports
     >>> sol.ys.shape
     (7, 3)
 
-Three public names:
+The public names:
 
 * ``term(system, split, **options)`` -> ``SplittingTerm``: the exact flows of one split of a
   system of the system layer (its parameters are array leaves: traced, vmapped,
@@ -20,7 +20,9 @@ Three public names:
   composition Ψ_h of the term's flows with h = t₁ − t₀, the same map as
   ``jaxsplit.splitting(system, scheme, split)``. The scheme is static (a new scheme is a new
   compilation); everything else is traced.
-* ``PartialStep``: its dense output. The state at t inside a step [t_k, t_k+1] is
+* ``RolledSplitting.of(scheme, term, length)``: the same with the scheme's word as traced
+  arrays (one compilation for many schemes; ``vmap`` over schemes, ``grad`` in the weights).
+* ``PartialStep``: the dense output. The state at t inside a step [t_k, t_k+1] is
   Ψ_δ(x_k) with δ = t − t_k, the *same* composition over the partial interval, so every
   output (``SaveAt(ts=...)``, ``SaveAt(dense=True)``, events) is the image of a Poisson map:
   Casimirs to round-off, the scheme's order. A polynomial (Hermite) interpolant instead
@@ -43,9 +45,10 @@ What diffrax features do with it:
 * Adjoints: the default ``RecursiveCheckpointAdjoint`` and ``DirectAdjoint`` differentiate
   through the steps (gradients agree with ``jaxsplit.integrate``'s). ``BacksolveAdjoint``
   solves the continuous adjoint ODE with the same solver, whose term is not a split system:
-  diffrax refuses it (term/solver incompatible).
-* ``jax.vmap``, ``jax.jit``, progress meters, ``SaveAt(t0=, t1=, ts=, steps=, dense=)``,
-  events and a negative time direction work as for any diffrax solver.
+  the forward solve runs, and diffrax refuses its gradient (term/solver incompatible).
+* ``jax.vmap``, ``jax.jit``, progress meters, ``SaveAt(t0=, t1=, ts=, steps=, dense=)`` and
+  a negative time direction work as for any diffrax solver; events are located on the dense
+  output, so the event state is a partial step too (on the Casimir's level set).
 * ``args`` of ``diffeqsolve`` must be ``None``: the exact flows take their parameters from
   the system, so build the term inside the function you vmap or differentiate (refused, not
   ignored).

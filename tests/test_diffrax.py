@@ -8,6 +8,9 @@ Every scheme runs through ``RolledSplitting`` (one compilation, vmapped over the
 the default ``Splitting`` is checked on one scheme of each form.
 """
 
+import subprocess
+import sys
+
 import diffrax
 import jax
 import jax.numpy as jnp
@@ -226,6 +229,32 @@ def test_vmap_over_bodies_and_states_with_a_progress_meter(capfd):
 
     assert max_diff(jax.vmap(ours)(inertias, m0s), jax.vmap(ref)(inertias, m0s)) <= SAME
     assert "100.00%" in capfd.readouterr().out
+
+
+def test_events_are_located_on_partial_steps():
+    import optimistix as optx
+
+    term = jd.term(BODY, split="casimir", shift=SHIFT)
+    event = diffrax.Event(lambda t, y, args, **kw: y[1] - 0.2, root_finder=optx.Newton(1e-12, 1e-12))
+    sol = solve(term, jd.Splitting("kahan-li-6"), M0, event=event)
+    assert 0.0 < float(sol.ts[-1]) < T_END and abs(float(sol.ys[-1, 1]) - 0.2) <= 1e-12
+    assert casimir_drift(sol.ys, M0) <= CASIMIR_TOL
+
+
+def test_backsolve_adjoint_gradient_is_refused_by_diffrax():
+    def loss(inertia):
+        term = jd.term(jaxsplit.RigidBody(inertia), split="casimir", shift=SHIFT)
+        return jnp.sum(solve(term, jd.Splitting("strang"), M0, t1=1.0, adjoint=diffrax.BacksolveAdjoint()).ys)
+
+    with pytest.raises(ValueError, match="not compatible with solver"):
+        jax.grad(loss)(jnp.asarray(CASE.inertia))
+
+
+def test_the_core_package_does_not_need_diffrax():
+    code = ("import sys; sys.modules['diffrax'] = None; import jaxsplit\n"
+            "try:\n    import jaxsplit.diffrax\nexcept ImportError as e:\n    print(e)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert 'pip install -e ".[diffrax]"' in out
 
 
 # ------------------------------------------------------------------ what is refused, adaptive steps
