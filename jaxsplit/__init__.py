@@ -59,6 +59,7 @@ from .core._compose import roll as roll
 from .core._errors import InputError as InputError
 from .core._flows import AbstractFlow as AbstractFlow
 from .core._flows import FunctionFlow as FunctionFlow
+from .core._flows import Renormalized as Renormalized
 from .core._flows import Substeps as Substeps
 from .core._integrate import Solution as Solution
 from .core._integrate import Trajectory as Trajectory

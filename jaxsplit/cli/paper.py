@@ -4,10 +4,12 @@ import os
 import time
 
 EXAMPLES = """examples:
-  jaxsplit paper --out audit                     # all claims (~40 s on 2 cores)
+  jaxsplit paper --out audit                     # all claims: measured ~95 s wall on 2 cores,
+                                                 # 2.5-3 min while other jobs share them
   jaxsplit paper --out audit --force             # replace an earlier audit in DIR
   jaxsplit paper --out audit --claims thm4.1,rem4.4
-Verdicts (confirmed, refuted, corrected, not-checkable) are computed from the measurements."""
+Verdicts (confirmed, refuted, corrected, answered, not-checkable) are computed from the
+measurements; report.md states the rule of each."""
 
 
 def add_parser(sub):
