@@ -128,6 +128,14 @@ class Renormalized(AbstractFlow):
     no longer exactly a composition of exact flows, so say so where it is used. ``norms`` is
     a PyTree matching the state with a norm (array) where to project and ``None`` elsewhere,
     e.g. ``jnp.linalg.norm(m0)`` for the free body, ``(None, 1.0)`` for a heavy top's Γ.
+    The norms are traced (array leaves); the state keeps its structure and dtypes.
+
+    >>> import jax.numpy as jnp, jaxsplit
+    >>> m0 = jnp.array([0.6, 0.0, 0.8], dtype=jnp.float32)
+    >>> step = jaxsplit.splitting(jaxsplit.RigidBody([2.0, 1.0, 0.5]), "strang", "casimir", shift=1)
+    >>> m = jaxsplit.integrate(jaxsplit.Renormalized(step, jnp.linalg.norm(m0)), m0, 0.1, 100).final
+    >>> m.dtype, bool(abs(float(jnp.linalg.norm(m)) - 1.0) < 1e-6)
+    (dtype('float32'), True)
     """
 
     step: Any
