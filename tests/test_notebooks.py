@@ -1,32 +1,11 @@
-"""Every notebook runs top to bottom (reduced size: JAXSPLIT_NOTEBOOK_SMALL=1), in parallel."""
+"""Every notebook runs top to bottom (reduced size: JAXSPLIT_NOTEBOOK_SMALL=1), in parallel;
+the executed copies are kept for the docs build (``conftest.executed_notebooks``)."""
 
-import os
 import pathlib
-import subprocess
-import sys
-import textwrap
 
 import pytest
 
 NOTEBOOKS = sorted((pathlib.Path(__file__).parent.parent / "notebooks").glob("*.ipynb"))
-CELL_TIMEOUT = 600  # seconds per cell (nbclient)
-RUNNER = textwrap.dedent(f"""
-    import sys, nbformat
-    from nbclient import NotebookClient
-    nb = nbformat.read(sys.argv[1], as_version=4)
-    NotebookClient(nb, timeout={CELL_TIMEOUT}, kernel_name="python3",
-                   resources={{"metadata": {{"path": sys.argv[2]}}}}).execute()
-""")
-
-
-@pytest.fixture(scope="module")
-def runs():
-    """Start every notebook at once (compilation is single-threaded: 2 cores help)."""
-    env = dict(os.environ, JAXSPLIT_NOTEBOOK_SMALL="1", MPLBACKEND="Agg")
-    procs = {nb.name: subprocess.Popen([sys.executable, "-c", RUNNER, str(nb), str(nb.parent)], env=env,
-                                       stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-             for nb in NOTEBOOKS}
-    return {name: (p.wait(timeout=900), p.communicate()) for name, p in procs.items()}
 
 
 def test_there_are_three_stories():
@@ -34,8 +13,9 @@ def test_there_are_three_stories():
 
 
 @pytest.mark.parametrize("name", [nb.name for nb in NOTEBOOKS])
-def test_notebook_executes(runs, name):
-    code, (_out, err) = runs[name]
+def test_notebook_executes(executed_notebooks, name):
+    _, runs = executed_notebooks
+    code, err = runs[name]
     assert code == 0, err[-4000:]
 
 

@@ -23,6 +23,15 @@ ORDER_WINDOW = (1e-13, 1e-4)  # ~10x the float64 round-off floor seen at T = 10 
 
 
 class OrderFit(NamedTuple):
+    """A fitted order: ``order`` (float), ``step_sizes`` and ``errors`` (NumPy (L,), float64)
+    and ``used`` (bool (L,): the points inside the fit window).
+
+    >>> import jaxsplit
+    >>> fit = jaxsplit.fit_order([0.1, 0.05, 0.025], [1e-5, 2.5e-6, 6.25e-7])
+    >>> round(fit.order, 6), fit.used.tolist()
+    (2.0, [True, True, True])
+    """
+
     order: float
     step_sizes: np.ndarray
     errors: np.ndarray
@@ -32,7 +41,17 @@ class OrderFit(NamedTuple):
 def fit_order(step_sizes, errors, window=ORDER_WINDOW, max_step: float = np.inf,
               min_points: int = 3) -> OrderFit:
     """Least-squares slope of log(error) against log(h) over points with error in ``window``
-    and |h| <= ``max_step``."""
+    and |h| <= ``max_step``: an ``OrderFit``. Plain NumPy (concrete values, not traced);
+    fewer than ``min_points`` usable points raise an ``InputError``.
+
+    >>> import jaxsplit
+    >>> round(jaxsplit.fit_order([0.2, 0.1, 0.05, 0.025], [1.6e-5, 1e-6, 6.25e-8, 3.90625e-9]).order, 2)
+    4.0
+    >>> jaxsplit.fit_order([0.2, 0.1, 0.05], [1e-2, 6e-4, 3.75e-5])    # pre-asymptotic: refused
+    Traceback (most recent call last):
+    ...
+    jaxsplit.core._errors.InputError: only 1 points lie in the fit window (1e-13, 0.0001), h <= inf (need 3): ...
+    """
     h = np.abs(np.asarray(step_sizes, dtype=float))
     e = np.asarray(errors, dtype=float)
     used = np.isfinite(e) & (e >= window[0]) & (e <= window[1]) & (h <= max_step)
@@ -47,7 +66,20 @@ def fit_order(step_sizes, errors, window=ORDER_WINDOW, max_step: float = np.inf,
 
 
 def global_errors(step, x0, t_end: float, counts, reference):
-    """(step sizes, max-norm errors at ``t_end``) for each step count in ``counts``."""
+    """(step sizes, max-norm errors at ``t_end``) for each step count in ``counts``.
+
+    One compilation for the whole ladder (module docstring). ``x0`` and ``reference`` are
+    PyTrees of the same structure; returns two NumPy arrays of shape (len(counts),) in the
+    state's dtype, sorted by increasing count.
+
+    >>> import jax.numpy as jnp, jaxsplit
+    >>> body = jaxsplit.RigidBody([2.0, 2.0, 1.0])                          # symmetric: exact solution
+    >>> m0 = jnp.array([0.6, 0.0, 0.8])
+    >>> step = jaxsplit.splitting(body, "strang", "axes")
+    >>> hs, errors = jaxsplit.global_errors(step, m0, 1.0, [10, 20], jaxsplit.symmetric_solution(body, m0, 1.0))
+    >>> hs.tolist(), bool(3.9 < errors[0] / errors[1] < 4.1)              # second order
+    ([0.1, 0.05], True)
+    """
     counts = np.asarray(sorted(int(n) for n in counts))
     if counts[0] < 1:
         raise InputError(f"step counts must be >= 1, got {counts.tolist()}")
@@ -64,7 +96,13 @@ def global_errors(step, x0, t_end: float, counts, reference):
 
 
 def ladder(start: int, factor: float = 16.0, points: int = 12):
-    """Step counts growing geometrically from ``start`` by ``factor`` overall."""
+    """``points`` step counts growing geometrically from ``start`` by ``factor`` overall
+    (rounded, duplicates dropped, sorted): the ladder for ``estimate_order``.
+
+    >>> import jaxsplit
+    >>> jaxsplit.ladder(10, 8.0, 4)
+    [10, 20, 40, 80]
+    """
     return sorted({round(start * factor ** (k / (points - 1))) for k in range(points)})
 
 
@@ -78,7 +116,15 @@ def estimate_order(step, x0, t_end: float, counts, reference=None, *, reference_
     ``reference_count`` steps (default: 16 × the largest count; pass a higher-order
     ``reference_step`` when ``step`` is of low order). The errors are max-norm global
     errors (``global_errors``, one compile) and the order is their log-log slope inside
-    ``window`` (``fit_order``).
+    ``window`` (``fit_order``). ``t_end`` is traced, ``counts`` static.
+
+    >>> import jax.numpy as jnp, jaxsplit
+    >>> body = jaxsplit.RigidBody(jaxsplit.STANDARD_CASE.inertia)
+    >>> step = jaxsplit.splitting(body, "suzuki-5", "casimir", shift=1)
+    >>> fit = jaxsplit.estimate_order(step, jnp.array(jaxsplit.STANDARD_CASE.m0), 10.0, jaxsplit.ladder(40, 4.0, 4),
+    ...                               jnp.array(jaxsplit.STANDARD_CASE.reference))
+    >>> round(fit.order)
+    4
     """
     if reference is None:
         reference_step = step if reference_step is None else reference_step

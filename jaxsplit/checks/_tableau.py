@@ -41,14 +41,27 @@ def _coefficients(tableau):
 
 
 def symplecticity_matrix(tableau) -> np.ndarray:
-    """M_ij = b_i a_ij + b_j a_ji − b_i b_j (condition (2.7) is M = 0)."""
+    """M_ij = b_i a_ij + b_j a_ji − b_i b_j (condition (2.7) is M = 0); NumPy float64 (s, s) for
+    an s-stage tableau (a ``ButcherTableau`` or an (A, b) pair).
+
+    >>> import jaxsplit
+    >>> jaxsplit.symplecticity_matrix(jaxsplit.tableaus["implicit-midpoint"]).tolist()
+    [[0.0]]
+    """
     a, b = _coefficients(tableau)
     ba = b[:, None] * a
     return ba + ba.T - np.outer(b, b)
 
 
 def condition_2_7_defect(tableau) -> float:
-    """max_ij |b_i a_ij + b_j a_ji − b_i b_j|."""
+    """max_ij |b_i a_ij + b_j a_ji − b_i b_j| (a float): 0 for symplectic RK methods.
+
+    >>> import jaxsplit
+    >>> jaxsplit.condition_2_7_defect(jaxsplit.tableaus["gauss-legendre-2"]) < 1e-15
+    True
+    >>> jaxsplit.condition_2_7_defect(jaxsplit.tableaus["trapezoid"])
+    0.25
+    """
     return float(np.max(np.abs(symplecticity_matrix(tableau))))
 
 
@@ -75,7 +88,13 @@ def _key(tree: Tree):
 
 @functools.cache
 def rooted_trees(order: int) -> tuple[Tree, ...]:
-    """All rooted trees with ``order`` vertices, each once (children as a sorted multiset)."""
+    """All rooted trees with ``order`` vertices, each once; a tree is the tuple of its children
+    (a sorted multiset), τ = ``()``. Cached.
+
+    >>> import jaxsplit
+    >>> jaxsplit.rooted_trees(3), [len(jaxsplit.rooted_trees(p)) for p in range(1, 6)]
+    ((((), ()), (((),),)), [1, 1, 2, 4, 9])
+    """
     if not (isinstance(order, int) and order >= 1):
         raise InputError(f"tree order must be a positive integer, got {order!r}")
     if order == 1:
@@ -115,7 +134,13 @@ class OrderCondition(NamedTuple):
 
 
 def order_conditions(tableau, max_order: int = 4) -> tuple[OrderCondition, ...]:
-    """Residuals of every order condition of order <= ``max_order`` (default 4: 8 trees)."""
+    """Residuals of every order condition of order <= ``max_order`` (default 4: 8 trees): a
+    tuple of ``(tree, order, residual)`` records, residual = Σ b_i Φ_i(t) − 1/γ(t) (float64).
+
+    >>> import jaxsplit
+    >>> [(c.tree, c.order) for c in jaxsplit.order_conditions(jaxsplit.tableaus["rk4"], 3)]
+    [('τ', 1), ('[τ]', 2), ('[τ,τ]', 3), ('[[τ]]', 3)]
+    """
     a, b = _coefficients(tableau)
     rows = []
     for p in range(1, max_order + 1):
@@ -125,7 +150,12 @@ def order_conditions(tableau, max_order: int = 4) -> tuple[OrderCondition, ...]:
 
 
 def tableau_order(tableau, max_order: int = 4, tol: float = ORDER_TOL) -> int:
-    """The largest p <= ``max_order`` with every condition of order <= p satisfied to ``tol``."""
+    """The largest p <= ``max_order`` with every condition of order <= p satisfied to ``tol`` (an int).
+
+    >>> import jaxsplit
+    >>> jaxsplit.tableau_order(jaxsplit.tableaus["rk4"]), jaxsplit.tableau_order(jaxsplit.tableaus["gauss-legendre-3"], 7)
+    (4, 6)
+    """
     p = 0
     for cond in order_conditions(tableau, max_order):
         if abs(cond.residual) > tol:

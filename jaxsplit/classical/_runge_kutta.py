@@ -54,7 +54,14 @@ class ButcherTableau:
     ``order`` is the declared classical order; it is verified against the Butcher
     order conditions (all rooted trees up to that order) in ``__post_init__``, and
     ``c`` must equal the row sums of ``A``. ``order=0`` marks an inconsistent method
-    (kept only to study it).
+    (kept only to study it). ``a`` (s rows of s floats), ``b`` and ``c`` (s floats) are tuples
+    of Python floats: static data (a new tableau compiles anew; ``CoefficientRungeKutta``
+    takes traced arrays). ``jaxsplit.tableaus`` holds the named ones.
+
+    >>> import jaxsplit
+    >>> heun = jaxsplit.ButcherTableau("heun", ((0.0, 0.0), (1.0, 0.0)), (0.5, 0.5), 2)
+    >>> heun.stages, heun.explicit, jaxsplit.tableau_order(heun)
+    (2, True, 2)
     """
 
     name: str
@@ -123,7 +130,14 @@ _GAUSS = {
 
 
 def gauss_legendre_tableau(stages: int) -> ButcherTableau:
-    """The s-stage Gauss–Legendre method, order 2s (closed forms for s <= 3)."""
+    """The s-stage Gauss–Legendre ``ButcherTableau``, order 2s (closed forms for s <= 3,
+    collocation in float64 beyond).
+
+    >>> import jaxsplit
+    >>> t = jaxsplit.gauss_legendre_tableau(2)
+    >>> t.order, t.stages, jaxsplit.condition_2_7_defect(t) < 1e-15
+    (4, 2, True)
+    """
     if isinstance(stages, bool) or not isinstance(stages, (int, np.integer)) or not 1 <= stages <= 8:
         raise InputError(f"Gauss-Legendre stages must be an integer in 1..8, got {stages!r}")
     stages = int(stages)
@@ -226,8 +240,21 @@ def _solve_stages(g, z0, max_iter):
 class RungeKutta(AbstractFlow):
     """One step ``step(x, h)`` of the tableau on ``system`` (a module: its parameters trace).
 
-    Acts on any PyTree state (on its floating leaves, raveled). A flow in the composer's
-    sense, but not an exact one-parameter group: it is never merged.
+    Acts on any PyTree state (on its floating leaves, raveled; result of the same structure
+    and dtypes). A flow in the composer's sense, but not an exact one-parameter group: it is
+    never merged. Traced: the system's array fields, ``x``, ``h``; static: the tableau and
+    ``max_iter`` (Newton iterations of implicit stages, differentiated by the implicit
+    function theorem). ``stage_derivatives`` and ``newton_info`` expose the stage solve.
+
+    >>> import jax.numpy as jnp, jaxsplit
+    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5])
+    >>> m0 = jnp.array([0.6, 0.0, 0.8])
+    >>> step = jaxsplit.runge_kutta(body, "implicit-midpoint")
+    >>> m1 = step(m0, 0.1)
+    >>> float(abs(body.casimir(m1) - body.casimir(m0))) < 1e-15           # quadratic invariants kept
+    True
+    >>> int(step.newton_info(m0, 0.1).iterations) <= 10
+    True
     """
 
     system: object
@@ -279,7 +306,17 @@ class RungeKutta(AbstractFlow):
 
 def runge_kutta(system, tableau: "ButcherTableau | str", *, max_iter: int = 50) -> RungeKutta:
     """The Runge–Kutta step (2.3) of ``tableau`` (a ``ButcherTableau`` or a name in ``tableaus``)
-    for ``system`` (a ``HamiltonPoisson``, a ``RigidBody``, or any f(x) -> ẋ)."""
+    for ``system`` (any system of the system layer, or any f(x) -> ẋ): a ``RungeKutta``.
+
+    >>> import jax.numpy as jnp, jaxsplit
+    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5])
+    >>> m0 = jnp.array([0.6, 0.0, 0.8])
+    >>> step = jaxsplit.runge_kutta(body, "gauss-legendre-2")
+    >>> jaxsplit.integrate(step, m0, 0.1, 10).final.shape
+    (3,)
+    >>> round(float(jaxsplit.runge_kutta(lambda x: -x, "rk4")(jnp.array([1.0]), 0.1)[0]), 8)   # any f(x)
+    0.9048375
+    """
     if isinstance(tableau, str):
         if tableau not in tableaus:
             raise InputError(f"unknown tableau {tableau!r}; known: {', '.join(tableaus)}")
@@ -298,7 +335,16 @@ class CoefficientRungeKutta(AbstractFlow):
     Every tableau, explicit or not, is solved by the same Newton iteration (for a strictly
     lower-triangular A it terminates in at most s iterations), so one compilation serves a
     whole family of tableaus of the same size: ``vmap`` over coefficients (pad smaller
-    tableaus with zero rows/weights), or differentiate with respect to them.
+    tableaus with zero rows/weights), or differentiate with respect to them. ``a`` (s, s),
+    ``b`` (s,) floating arrays (traced); state and ``h`` as for ``RungeKutta``.
+
+    >>> import jax, jax.numpy as jnp, jaxsplit
+    >>> step = jaxsplit.runge_kutta_coefficients(lambda x: -x, jnp.array([[0.5]]), jnp.array([1.0]))  # midpoint
+    >>> round(float(step(jnp.array([1.0]), 0.1)[0]), 12)                                      # (1 - h/2)/(1 + h/2)
+    0.904761904762
+    >>> x1 = lambda b: jaxsplit.runge_kutta_coefficients(lambda x: -x, jnp.array([[0.5]]), b)(jnp.array([1.0]), 0.1)
+    >>> jax.grad(lambda b: x1(b)[0])(jnp.array([1.0])).round(12).tolist()     # d x1 / d b = h K
+    [-0.095238095238]
     """
 
     system: object
@@ -320,7 +366,14 @@ class CoefficientRungeKutta(AbstractFlow):
 
 
 def runge_kutta_coefficients(system, a, b, *, max_iter: int = 50) -> CoefficientRungeKutta:
-    """An RK step from coefficient arrays ``a`` (s, s) and ``b`` (s,), which may be traced."""
+    """A ``CoefficientRungeKutta`` step from coefficient arrays ``a`` (s, s) and ``b`` (s,), which
+    may be traced (``vmap`` over tableaus, ``grad`` in the coefficients).
+
+    >>> import jax.numpy as jnp, jaxsplit
+    >>> a, b = jnp.array([[0.0, 0.0], [1.0, 0.0]]), jnp.array([0.5, 0.5])            # Heun
+    >>> round(float(jaxsplit.runge_kutta_coefficients(lambda x: -x, a, b)(jnp.array([1.0]), 0.1)[0]), 12)
+    0.905
+    """
     a, b = jnp.asarray(a), jnp.asarray(b)
     if a.ndim != 2 or a.shape[0] != a.shape[1] or b.shape != a.shape[:1]:
         raise InputError(f"A must be s x s and b of length s, got shapes {a.shape} and {b.shape}")
@@ -341,20 +394,55 @@ def padded_coefficients(tableau: ButcherTableau, stages: int):
 
 
 def explicit_euler(system) -> RungeKutta:
-    """(2.4): x_{n+1} = x_n + h f(x_n)."""
+    """Explicit Euler (2.4), x_{n+1} = x_n + h f(x_n), as a ``RungeKutta`` step for ``system``.
+    On the free body |m|² grows by exactly h²|f(m)|² a step (f ⊥ m).
+
+    >>> import jax.numpy as jnp, jaxsplit
+    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5])
+    >>> m0 = jnp.array([0.6, 0.0, 0.8])
+    >>> m1 = jaxsplit.explicit_euler(body)(m0, 0.1)
+    >>> f = body.vector_field(m0)
+    >>> bool(jnp.isclose(m1 @ m1 - m0 @ m0, 0.01 * f @ f, rtol=1e-12))
+    True
+    """
     return runge_kutta(system, "explicit-euler")
 
 
 def trapezoid(system) -> RungeKutta:
-    """The trapezoidal rule x_{n+1} = x_n + h/2 (f(x_n) + f(x_{n+1})): the consistent form of (2.5)."""
+    """The trapezoidal rule x_{n+1} = x_n + h/2 (f(x_n) + f(x_{n+1})): the consistent form of (2.5),
+    as an implicit ``RungeKutta`` step. Not Poisson: it drifts off the Casimir's sphere.
+
+    >>> import jax.numpy as jnp, jaxsplit
+    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5])
+    >>> m0 = jnp.array([0.6, 0.0, 0.8])
+    >>> m1 = jaxsplit.trapezoid(body)(m0, 0.1)
+    >>> float(abs(body.casimir(m1) - body.casimir(m0))) > 1e-8
+    True
+    """
     return runge_kutta(system, "trapezoid")
 
 
 def gauss_legendre(system, stages: int = 1) -> RungeKutta:
-    """Gauss–Legendre with ``stages`` stages (order 2s); s = 1 is the implicit midpoint rule (2.2)."""
+    """Gauss–Legendre with ``stages`` stages (order 2s, static); s = 1 is the implicit midpoint
+    rule (2.2). Keeps every quadratic invariant (H and C of the free body) to round-off.
+
+    >>> import jax.numpy as jnp, jaxsplit
+    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5])
+    >>> m0 = jnp.array([0.6, 0.0, 0.8])
+    >>> sol = jaxsplit.integrate(jaxsplit.gauss_legendre(body, 2), m0, 0.1, 50)
+    >>> float(abs(body.hamiltonian(sol.final) / body.hamiltonian(m0) - 1)) < 1e-14
+    True
+    """
     return runge_kutta(system, gauss_legendre_tableau(stages))
 
 
 def rk4(system) -> RungeKutta:
-    """The classical fourth-order Runge–Kutta method."""
+    """The classical fourth-order Runge–Kutta method for ``system`` (a ``RungeKutta`` step).
+
+    >>> import jax.numpy as jnp, jaxsplit
+    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5])
+    >>> m0 = jnp.array([0.6, 0.0, 0.8])
+    >>> jaxsplit.rk4(body)(m0, 0.1).shape
+    (3,)
+    """
     return runge_kutta(system, "rk4")

@@ -39,7 +39,17 @@ class Ruth(eqx.Module):
 
 
 def ruth(potential: Callable = _half_square, kinetic: Callable = _half_square) -> Ruth:
-    """The Ruth integrator (2.6); defaults give Example 2.1's harmonic oscillator."""
+    """The Ruth integrator (2.6) for H = T(p) + V(q) (``kinetic``, ``potential``: functions of
+    (m,) arrays, static); defaults give Example 2.1's harmonic oscillator. The step acts on
+    x = (q, p) of shape (2m,) in x's dtype.
+
+    >>> import jax.numpy as jnp, jaxsplit
+    >>> step = jaxsplit.ruth()
+    >>> step(jnp.array([1.0, 0.0]), 0.1).tolist()                  # x¹ + h x², −h x¹ + (1 − h²) x²
+    [1.0, -0.1]
+    >>> float(jaxsplit.symplectic_defect(step, jnp.array([0.3, 0.7]), 0.1)) < 1e-15
+    True
+    """
     if not callable(potential) or not callable(kinetic):
         raise InputError("ruth needs callables potential(q) and kinetic(p)")
     return Ruth(potential, kinetic)

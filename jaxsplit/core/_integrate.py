@@ -38,11 +38,19 @@ from ._state import as_state, float_dtype
 class Solution(eqx.Module):
     """The result of ``integrate``: states ``x[i]`` (any PyTree, leading axis K) at times ``t[i]``.
 
-    ``final`` is the last saved state (the end of the run, or the last requested time);
-    ``n_steps`` the full steps taken (static; ``None`` for ``ts=`` runs), ``h`` the step size, ``scheme`` the scheme's
-    name (``None`` for a plain function), ``finite`` whether every saved state is finite (an
-    array: it vmaps) and ``status`` the same as ``"ok"`` / ``"nonfinite"`` (concrete values).
-    Under ``vmap`` every array field gains the batch axis.
+    Shapes and dtypes: ``t`` (K,) and ``h`` () in the state's floating dtype; every leaf of
+    ``x`` is the state's leaf with a leading axis K (K = 2 without saving: initial and final);
+    ``finite`` a bool scalar. ``final`` is the last saved state (the end of the run, or the
+    last requested time); ``n_steps`` the full steps taken (static; ``None`` for ``ts=`` runs),
+    ``scheme`` the scheme's name (static; ``None`` for a plain function), ``status`` is
+    ``"ok"`` / ``"nonfinite"`` (needs concrete values). Under ``vmap`` every array field gains
+    the batch axis. ``Trajectory`` is the former name.
+
+    >>> import jax.numpy as jnp, jaxsplit
+    >>> step = jaxsplit.splitting(jaxsplit.RigidBody([2.0, 1.0, 0.5]), "strang", "casimir", shift=1)
+    >>> sol = jaxsplit.integrate(step, jnp.array([0.6, 0.0, 0.8]), 0.5, 4)
+    >>> sol.t.tolist(), sol.x.shape, sol.final.shape, sol.n_steps, sol.scheme, sol.status
+    ([0.0, 2.0], (2, 3), (3,), 4, 'strang', 'ok')
     """
 
     t: jax.Array
@@ -218,6 +226,10 @@ def integrate(step, x0, h, n_steps: int | None = None, *, save_every: int | None
     ``x0``'s floating leaves (integer leaves are left alone; an all-integer state is
     promoted to the default float).
 
+    Traced (new values reuse the compiled loop): ``x0``, ``h``, ``t0``, the values of ``ts``
+    and every array or float leaf of ``step`` (a body's inertia). Static: ``n_steps``,
+    ``save_every``, the length of ``ts``, ``adjoint`` and the structure of ``step``.
+
     >>> import jax.numpy as jnp, jaxsplit
     >>> step = jaxsplit.splitting(jaxsplit.RigidBody([2.0, 1.0, 0.5]), "strang", "casimir")
     >>> sol = jaxsplit.integrate(step, jnp.array([0.6, 0.0, 0.8]), 0.1, 100, save_every=10)
@@ -256,7 +268,15 @@ def integrate_checkpointed(step, x0, h, n_steps: int, *, block: int | None = Non
     The steps run as ⌊n/B⌋ blocks of B (default ⌈√n⌉) under ``jax.checkpoint`` plus the
     remainder; the forward values are those of ``integrate`` (same merged sub-flows).
     Not jitted: call it inside your own ``jit``/``grad`` (or use ``integrate(...,
-    adjoint="checkpoint")``).
+    adjoint="checkpoint")``). ``x0`` any PyTree (result: same structure and dtypes), ``h``
+    traced, ``n_steps`` and ``block`` static.
+
+    >>> import jax, jax.numpy as jnp, jaxsplit
+    >>> def loss(inertia):
+    ...     step = jaxsplit.splitting(jaxsplit.RigidBody(inertia), "strang", "casimir", shift=1)
+    ...     return jaxsplit.integrate_checkpointed(step, jnp.array([0.6, 0.0, 0.8]), 0.1, 100)[0]
+    >>> jax.jit(jax.grad(loss))(jnp.array([2.0, 1.0, 0.5])).shape
+    (3,)
     """
     n_steps = check_count(n_steps, "n_steps", 0)
     if block is not None:

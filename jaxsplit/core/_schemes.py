@@ -34,7 +34,23 @@ def _mirror(half, centre=None):
 
 @dataclasses.dataclass(frozen=True)
 class Scheme:
-    """A composition scheme: frozen, hashable, validated when built."""
+    """A composition scheme: frozen, hashable, validated when built.
+
+    ``form`` is ``"symmetric"``, ``"lie-adjoint"`` or ``"partitioned"`` (module docstring);
+    ``coefficients`` a tuple of Python floats (the weights γ, α, or a/b interleaved), summing
+    to 1 (per piece for partitioned); ``order`` the claimed order (measured in the test
+    suite). Pure data: static wherever it is used (a new scheme compiles anew; use ``roll``
+    to make the weights traced arrays).
+
+    >>> import jaxsplit
+    >>> s = jaxsplit.Scheme("my-strang", 2, "symmetric", (1.0,), "Strang 1968")
+    >>> s.stages, s.symmetric, jaxsplit.schemes["suzuki-5"].order
+    (1, True, 4)
+    >>> jaxsplit.Scheme("bad", 2, "symmetric", (0.5,))
+    Traceback (most recent call last):
+    ...
+    jaxsplit.core._errors.InputError: bad: weights must sum to 1 (consistency), got (0.5,)
+    """
 
     name: str
     order: int
@@ -93,7 +109,14 @@ class Scheme:
 
 
 def triple_jump(order: int) -> Scheme:
-    """The paper's recursive triple jump of even order 2n+2 (3^n Strang steps)."""
+    """The paper's recursive triple jump of even order ``order`` = 2n+2 (3^n Strang steps);
+    ``schemes["triple-jump-N"]`` resolves to it for any even N >= 2.
+
+    >>> import jaxsplit
+    >>> s = jaxsplit.triple_jump(4)
+    >>> s.name, s.stages, round(sum(s.coefficients), 15)
+    ('triple-jump-4', 3, 1.0)
+    """
     if not (isinstance(order, int) and order >= 2 and order % 2 == 0):
         raise InputError(f"triple-jump order must be an even integer >= 2, got {order!r}")
     gammas = (1.0,)
@@ -222,7 +245,18 @@ _TRIPLE_JUMP = re.compile(r"triple-jump-(\d+)")
 
 
 class SchemeRegistry(Mapping):
-    """Named schemes. ``triple-jump-N`` resolves for any even N >= 2."""
+    """The registry of named schemes (``jaxsplit.schemes``): a read-only mapping name -> ``Scheme``.
+
+    ``triple-jump-N`` resolves for any even N >= 2; an unknown name raises an ``InputError``
+    with the closest names. ``register`` adds a scheme; ``resolve`` accepts a name or a
+    ``Scheme``.
+
+    >>> import jaxsplit
+    >>> len(jaxsplit.schemes) >= 21, "strang" in jaxsplit.schemes, "triple-jump-12" in jaxsplit.schemes
+    (True, True, True)
+    >>> jaxsplit.schemes.resolve("kahan-li-6").order
+    6
+    """
 
     def __init__(self, schemes=()):
         self._schemes: dict[str, Scheme] = {}

@@ -1,0 +1,100 @@
+"""The documentation site builds with warnings as errors, has the API entry of every public name,
+renders the executed notebooks, and fails on a broken cross-reference."""
+
+import os
+import pathlib
+import re
+import subprocess
+import sys
+import textwrap
+import time
+
+import pytest
+from conftest import ROOT, docs_hooks
+
+import jaxsplit
+
+
+def mkdocs_build(config: pathlib.Path, site: pathlib.Path, env=None):
+    """(exit code, output, seconds) of ``mkdocs build --strict``."""
+    start = time.perf_counter()
+    run = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-f", str(config), "-d", str(site)],
+                         check=False, capture_output=True, text=True,
+                         env=dict(os.environ, NO_MKDOCS_2_WARNING="1", **(env or {})),
+                         cwd=config.parent, timeout=600)
+    return run.returncode, run.stdout + run.stderr, time.perf_counter() - start
+
+
+@pytest.fixture(scope="module")
+def site(executed_notebooks, tmp_path_factory):
+    folder, runs = executed_notebooks
+    if any(code for code, _ in runs.values()):
+        pytest.fail("a notebook failed to execute (see test_notebooks); the site renders executed copies")
+    out = tmp_path_factory.mktemp("site")
+    code, log, seconds = mkdocs_build(ROOT / "mkdocs.yml", out, {"JAXSPLIT_DOCS_NOTEBOOKS": str(folder)})
+    print(f"mkdocs build --strict: {seconds:.1f} s")
+    return code, log, out
+
+
+def test_the_site_builds_strict(site):
+    code, log, _ = site
+    assert code == 0, log[-4000:]
+
+
+def test_every_public_name_has_its_api_entry(site):
+    _, _, out = site
+    areas = docs_hooks().public_names()
+    names = [n for group in areas.values() for n in group]
+    assert len(names) > 50 and all(hasattr(jaxsplit, n) for n in names)
+    missing = [f"{area}: {n}" for area, group in areas.items() for n in group
+               if f'id="jaxsplit.{n}"' not in (out / "api" / area / "index.html").read_text()]
+    diffrax_html = (out / "api" / "diffrax" / "index.html").read_text()
+    missing += [n for n in docs_hooks()._diffrax_names() if f'id="jaxsplit.diffrax.{n}"' not in diffrax_html]
+    assert not missing
+
+
+def test_every_public_name_is_reexported_where_the_api_pages_look():
+    """The API pages read the ``from .area._module import X as X`` lines; a public name defined
+    any other way would be missing from the site."""
+    listed = {n for group in docs_hooks().public_names().values() for n in group}
+    public = {n for n, obj in vars(jaxsplit).items() if not n.startswith("_") and not isinstance(obj, type(os))
+              and getattr(obj, "__module__", "jaxsplit").startswith("jaxsplit")}  # not importlib's helpers
+    assert not public - listed, public - listed
+
+
+def test_generated_pages(site):
+    _, _, out = site
+    table = (out / "schemes" / "index.html").read_text()
+    assert all(f"<code>{name}</code>" in table for name in jaxsplit.schemes)
+    for notebook in (out / "notebooks").iterdir():
+        html = (notebook / "index.html").read_text()
+        assert "jp-OutputArea-output" in html, notebook.name  # rendered with its outputs
+    assert sum((n / "index.html").read_text().count("<img") for n in (out / "notebooks").iterdir()) >= 3
+    architecture = (out / "architecture" / "index.html").read_text()
+    assert re.search(r'href="\.\./api/core/#jaxsplit\.integrate"', architecture)  # cross-references resolved
+
+
+MINIMAL = textwrap.dedent("""
+    site_name: reference check
+    docs_dir: pages
+    plugins:
+      - autorefs
+      - mkdocstrings:
+          handlers:
+            python:
+              paths: [{root}]
+              options: {{docstring_style: null, show_source: false}}
+""")
+
+
+def test_a_broken_cross_reference_fails_the_strict_build(tmp_path):
+    """The same one-page site builds with a valid reference and fails with a broken one."""
+    (tmp_path / "pages").mkdir()
+    (tmp_path / "mkdocs.yml").write_text(MINIMAL.format(root=ROOT))
+    page = tmp_path / "pages" / "index.md"
+    page.write_text("# API\n\nSee [integrate][jaxsplit.integrate].\n\n::: jaxsplit.integrate\n")
+    code, log, _ = mkdocs_build(tmp_path / "mkdocs.yml", tmp_path / "site")
+    assert code == 0, log[-3000:]
+    page.write_text(page.read_text() + "\nAnd [nothing][jaxsplit.no_such_name].\n")
+    code, log, _ = mkdocs_build(tmp_path / "mkdocs.yml", tmp_path / "site")
+    assert code != 0 and "jaxsplit.no_such_name" in log
