@@ -1,0 +1,315 @@
+"""The one writer of the command line: every output file goes through ``Outputs``.
+
+A command *claims* its outputs before any work: each path is resolved
+(``Path.resolve()``: ``a/../run.npz``, ``./run.npz`` and a symlink to it are one file),
+compared with the command's other outputs by that resolved file (and by inode for hard
+links), checked (a regular file or nothing; no overwriting without ``--force``; a name
+the file system accepts; a writable directory) and *locked* (``flock`` on a lock file
+next to it, or inside an output directory), so a second run into the same output exits
+with status 2 instead of mixing its numbers with the first one's. Writing is atomic (a
+temporary file in the same directory, ``fsync``, ``os.replace``) and runs in the signal
+policy's ``critical`` mode, so a file is complete or absent, never half-written. Locks
+and temporary files are removed when the command ends, also when it is abandoned.
+
+Also here: what the commands print or store besides arrays (JSON with non-finite numbers
+as ``null``, metadata of a run).
+"""
+
+import contextlib
+import fcntl
+import hashlib
+import json
+import math
+import os
+import shutil
+import stat
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..core._errors import InputError
+from . import _signals
+
+DIRECTORY_LOCK = ".jaxsplit-lock"
+TEMP_PREFIX = ".jaxsplit-"
+TEMP_SUFFIX = ".tmp"
+
+
+class OutputBusy(InputError):
+    """The output is locked by another running command."""
+
+
+def _name_max(directory: Path) -> int:
+    try:
+        return os.pathconf(directory, "PC_NAME_MAX")
+    except (OSError, ValueError):
+        return 255
+
+
+def _resolve(path, what: str) -> Path:
+    text = os.fspath(path)
+    if text == "" or "\0" in text:
+        raise InputError(f"{what} path {text!r} is not a file name")
+    try:
+        return Path(text).expanduser().resolve()
+    except (OSError, RuntimeError) as err:  # a symlink loop
+        raise InputError(f"{what} path {text!r} cannot be resolved ({err})") from None
+
+
+class Outputs:
+    """The outputs of one command run: claimed up front, written atomically, locked until closed."""
+
+    def __init__(self, force: bool = False):
+        self.force = force
+        self._files: dict[Path, str] = {}
+        self._dirs: dict[Path, str] = {}
+        self._locks: list[tuple[int, Path]] = []
+        self._temporaries: set[str] = set()
+        self._stack = contextlib.ExitStack()
+
+    def __enter__(self):
+        self._stack.enter_context(_signals.current().cleanup(self._abandoned))
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        self._stack.close()
+        return False
+
+    # ------------------------------------------------------------------ claims
+    def file(self, path, what: str, *, force: bool | None = None) -> Path:
+        """Claim an output file: resolved, distinct from the other outputs, writable, locked,
+        and not existing unless ``force`` (default: the command's ``--force``)."""
+        force = self.force if force is None else force
+        shown = os.fspath(path)
+        p = _resolve(path, what)
+        given = Path(shown).expanduser()
+        if p.is_dir() or shown.endswith(("/", os.sep)):
+            raise InputError(f"{what} path {shown!r} is a directory; give a file name")
+        for other, other_what in self._files.items():
+            if other == p or (p.exists() and other.exists() and os.path.samefile(other, p)):
+                raise InputError(f"{what} {shown!r} is the same file as the {other_what} ({str(other)!r}); "
+                                 "give them different names")
+        parent = p.parent
+        if not parent.exists():
+            raise InputError(f"cannot write {what} {shown!r}: directory {str(parent)!r} does not exist")
+        if not parent.is_dir():
+            raise InputError(f"cannot write {what} {shown!r}: {str(parent)!r} is not a directory")
+        if len(os.fsencode(p.name)) > _name_max(parent):
+            raise InputError(f"{what} file name is {len(os.fsencode(p.name))} bytes long; the file system allows "
+                             f"{_name_max(parent)} ({shown[:40]!r}...)")
+        if parent not in self._dirs:  # a claimed directory's lock already covers its files
+            lock = parent / f"{TEMP_PREFIX}lock-{hashlib.sha256(os.fsencode(p.name)).hexdigest()[:16]}"
+            self._lock(lock, f"{what} {shown!r}")
+        if (p.exists() or given.is_symlink()) and not force:
+            raise InputError(f"{what} file {shown!r} exists; pass --force to overwrite it or choose another path")
+        if p.exists() and not stat.S_ISREG(p.stat().st_mode):
+            raise InputError(f"{what} {shown!r} exists and is not a regular file; it is never replaced")
+        self._files[p] = what
+        return p
+
+    def directory(self, path, what: str) -> Path:
+        """Claim an output directory (created if missing) and lock it: the files inside it
+        are the command's to write."""
+        shown = os.fspath(path)
+        p = _resolve(path, what)
+        if p.exists() and not p.is_dir():
+            raise InputError(f"{what} {shown!r} exists and is not a directory")
+        for other, other_what in self._dirs.items():
+            if other == p:
+                raise InputError(f"{what} {shown!r} is the same directory as the {other_what}")
+        if len(os.fsencode(p.name)) > _name_max(p.parent if p.parent.exists() else Path("/")):
+            raise InputError(f"{what} name is {len(os.fsencode(p.name))} bytes long, more than the file system "
+                             f"allows ({shown[:40]!r}...)")
+        try:
+            p.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise InputError(f"cannot create {what} {shown!r}: {err.strerror or err}") from None
+        self._lock(p / DIRECTORY_LOCK, f"{what} {shown!r}")
+        self._dirs[p] = what
+        return p
+
+    def _lock(self, lock: Path, what: str) -> None:
+        """flock(2) on ``lock``; held until ``close``. A lock file unlinked by its previous
+        holder between our open and our flock is a stale inode: open again."""
+        while True:
+            try:
+                fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+            except OSError as err:
+                raise InputError(f"cannot write {what}: {err.strerror or err}") from None
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                holder = os.pread(fd, 32, 0).decode(errors="replace").strip()
+                os.close(fd)
+                raise OutputBusy(f"{what} is in use by another jaxsplit run"
+                                 + (f" (pid {holder})" if holder.isdigit() else "")
+                                 + "; wait for it to finish or choose another output") from None
+            try:
+                same = os.path.samestat(os.fstat(fd), os.stat(lock))
+            except FileNotFoundError:
+                same = False
+            if same:
+                os.ftruncate(fd, 0)
+                os.pwrite(fd, str(os.getpid()).encode(), 0)
+                self._locks.append((fd, lock))
+                return
+            os.close(fd)
+
+    def claimed(self) -> set[Path]:
+        return set(self._files)
+
+    # ------------------------------------------------------------------ writing
+    def _check_claimed(self, path: Path) -> Path:
+        p = Path(path).resolve()
+        if p not in self._files and p.parent not in self._dirs:
+            raise RuntimeError(f"{p} was not claimed before writing")  # a bug, not bad input
+        return p
+
+    def write(self, path, write) -> Path:
+        """``write(binary file)`` into a temporary file next to ``path``, then rename over it."""
+        p = self._check_claimed(path)
+        with _signals.current().critical():
+            fd, tmp = tempfile.mkstemp(dir=p.parent, prefix=TEMP_PREFIX, suffix=TEMP_SUFFIX)
+            self._temporaries.add(tmp)
+            try:
+                os.fchmod(fd, 0o666 & ~_umask())
+                with os.fdopen(fd, "wb") as f:
+                    write(f)
+                    f.flush()
+                    os.fsync(f.fileno())
+                os.replace(tmp, p)
+                _fsync_directory(p.parent)
+            except OSError as err:
+                raise InputError(f"cannot write {p}: {err.strerror or err}") from None
+            finally:
+                self._temporaries.discard(tmp)
+                with contextlib.suppress(FileNotFoundError):
+                    os.unlink(tmp)
+        return p
+
+    def move_in(self, source: Path, path) -> Path:
+        """Rename a finished file (on the same file system) onto the claimed ``path``."""
+        p = self._check_claimed(path)
+        with _signals.current().critical():
+            try:
+                os.replace(source, p)
+                _fsync_directory(p.parent)
+            except OSError as err:
+                raise InputError(f"cannot write {p}: {err.strerror or err}") from None
+        return p
+
+    def write_bytes(self, path, data: bytes) -> Path:
+        return self.write(path, lambda f: f.write(data))
+
+    def write_json(self, path, obj) -> Path:
+        return self.write_bytes(path, (json.dumps(jsonable(obj), indent=2) + "\n").encode())
+
+    def write_npz(self, path, arrays: dict) -> Path:
+        return self.write(path, lambda f: np.savez(f, **arrays))
+
+    def remove_temporaries(self, directory: Path) -> None:
+        """Temporary files a killed run left in a claimed directory (we hold its lock)."""
+        for stale in Path(directory).glob(f"{TEMP_PREFIX}*{TEMP_SUFFIX}"):
+            stale.unlink(missing_ok=True)
+
+    @contextlib.contextmanager
+    def staging(self, directory: Path):
+        """A private directory inside the claimed ``directory`` for a producer that writes its
+        own files; removed afterwards (also when abandoned)."""
+        stage = Path(tempfile.mkdtemp(dir=directory, prefix=f"{TEMP_PREFIX}stage-"))
+        def remove():
+            shutil.rmtree(stage, ignore_errors=True)
+
+        with _signals.current().cleanup(remove):
+            try:
+                yield stage
+            finally:
+                remove()
+
+    # ------------------------------------------------------------------ release
+    def close(self) -> None:
+        for fd, lock in reversed(self._locks):
+            with contextlib.suppress(OSError):
+                os.unlink(lock)  # while still held: the next holder opens a fresh file
+            with contextlib.suppress(OSError):
+                os.close(fd)
+        self._locks = []
+
+    def _abandoned(self) -> None:
+        for tmp in list(self._temporaries):
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+        self.close()
+
+
+def _fsync_directory(directory: Path) -> None:
+    with contextlib.suppress(OSError):
+        fd = os.open(directory, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+# --------------------------------------------------------------------------- JSON and metadata
+
+
+def jsonable(obj):
+    """Plain JSON types; non-finite floats become None."""
+    if isinstance(obj, dict):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return jsonable(obj.tolist())
+    if isinstance(obj, (np.bool_, bool)):
+        return bool(obj)
+    if isinstance(obj, (np.integer, int)):
+        return int(obj)
+    if isinstance(obj, (np.floating, float)):
+        return float(obj) if math.isfinite(obj) else None
+    if isinstance(obj, Path):
+        return str(obj)
+    return obj
+
+
+def print_json(obj) -> None:
+    print(json.dumps(jsonable(obj), allow_nan=False))
+
+
+def metadata_array(meta: dict) -> np.ndarray:
+    """Metadata stored inside an ``.npz`` as a JSON string (loads without pickle)."""
+    return np.array(json.dumps(jsonable(meta)))
+
+
+def read_metadata(npz) -> dict:
+    return json.loads(str(npz["metadata"]))
+
+
+def run_metadata(command: str, argv=None) -> dict:
+    import platform
+
+    import jax
+
+    from .. import __version__
+
+    return {
+        "command": command,
+        "argv": list(sys.argv[1:] if argv is None else argv),
+        "jaxsplit_version": __version__,
+        "jax_version": jax.__version__,
+        "numpy_version": np.__version__,
+        "python_version": platform.python_version(),
+        "dtype": "float64",
+        "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+    }
