@@ -93,7 +93,7 @@ def main(argv=None) -> int:
         except BrokenPipeError:  # `jaxsplit schemes | head`
             return 0
         if stop.requested and status == 0:  # the signal came while the outputs were written: they are complete
-            print(f"jaxsplit: interrupted ({_signals.Interrupted(stop.received)}) after the work was done; "
+            print(f"jaxsplit: interrupted ({stop.signal_name}) after the work was done; "
                   "every output is complete", file=sys.stderr)
             return _signals.EXIT_INTERRUPTED
         return status

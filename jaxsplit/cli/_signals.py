@@ -6,16 +6,22 @@ interpreter's teardown then runs under those threads (``fit`` interrupted during
 ``backend.compile_and_load`` ended in a segmentation fault at exit). So a signal is only
 *recorded*, and what happens next depends on the mode of the moment:
 
-* ``abandon`` (the default; nothing finished would be lost: parsing, imports, compiling,
-  ``check``, ``fit``, the paper audit): the process ends at once with exit status 130,
-  through ``os._exit`` (no teardown racing XLA's threads) after the registered clean-ups
-  (lock files, staging directories). A helper thread woken by ``signal.set_wakeup_fd``
-  does this even while the main thread waits inside one long compiled call.
+* ``abandon`` (the default; nothing finished would be lost: parsing, compiling, ``check``,
+  ``fit``, the paper audit): the process ends at once with exit status 130 through
+  ``os._exit`` (no teardown racing XLA's threads), after the registered clean-ups (lock
+  files, temporary files, staging directories);
 * ``defer`` (finished work to keep: the chunks of ``simulate`` and ``sweep``): the command
   looks at ``requested`` between compiled calls, stops, writes what is finished and exits
-  130. A second signal abandons.
-* ``critical`` (an output being written or the results being printed): only recorded;
-  the write completes.
+  130; a second signal abandons;
+* ``critical`` (an output being written, the results being printed): only recorded; the
+  write completes (the exit status becomes 130).
+
+Each delivered signal is one byte in a pipe (``signal.set_wakeup_fd``) and is acted on
+exactly once, by whoever reads its byte: the Python handler (main thread, right after the
+delivery, in the mode of that moment) or, when the main thread has not run Python for
+``STUCK_SECONDS`` because it waits inside one long compiled call, a helper thread (the
+main thread's mode cannot change while it waits). So Ctrl-C ends a fit at once even in the
+middle of an XLA computation.
 
 A signal that was ignored when the process started (``nohup``, background jobs) stays
 ignored, as Python itself does for SIGINT.
@@ -23,13 +29,15 @@ ignored, as Python itself does for SIGINT.
 
 import contextlib
 import os
+import select
 import signal
 import sys
 import threading
+import time
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 EXIT_INTERRUPTED = 130
-MODES = ("abandon", "defer", "critical")
+STUCK_SECONDS = 0.2  # a signal byte left unread this long: the main thread is inside a compiled call
 
 
 class Interrupted(Exception):
@@ -37,7 +45,7 @@ class Interrupted(Exception):
 
     def __init__(self, signum: int):
         self.signum = signum
-        super().__init__(signal.Signals(signum).name)
+        super().__init__(signal.Signals(signum).name)  # "SIGINT", "SIGTERM"
 
 
 class Policy:
@@ -49,11 +57,15 @@ class Policy:
         self.mode = "abandon"
         self._cleanups: list = []
         self._previous: dict = {}
-        self._wakeup = None  # (read fd, write fd, previous wakeup fd)
+        self._pipe = None  # (read fd, write fd, previous wakeup fd)
 
     @property
     def requested(self) -> bool:
         return self.received is not None
+
+    @property
+    def signal_name(self) -> str:
+        return "no signal" if self.received is None else signal.Signals(self.received).name
 
     def check(self) -> None:
         """Raise ``Interrupted`` when a signal has arrived (call it between compiled calls)."""
@@ -90,16 +102,15 @@ class Policy:
         finally:
             self._cleanups.remove(fn)
 
-    # ------------------------------------------------------------------ handling
-    def _record(self, signum: int):
-        if self.received is None:
-            self.received = signum
-
-    def _handle(self, signum, frame=None):
-        """The Python-level handler (main thread, between bytecodes)."""
-        self._record(signum)
-        if self.mode == "abandon":
-            self.abandon(signum)
+    # ------------------------------------------------------------------ acting on signals
+    def _signalled(self, data: bytes):
+        """Act on delivered signals (one byte each), in the current mode."""
+        for signum in data:
+            self.count += 1
+            if self.received is None:
+                self.received = signum
+            if self.mode == "abandon" or (self.mode == "defer" and self.count > 1):
+                self.abandon(signum)
 
     def abandon(self, signum: int):
         for fn in reversed(list(self._cleanups)):
@@ -110,19 +121,26 @@ class Policy:
         os.write(2, f"jaxsplit: interrupted ({signal.Signals(signum).name})\n".encode())
         os._exit(EXIT_INTERRUPTED)
 
-    def _watch(self, read_fd: int):
-        """One byte per delivered signal (``set_wakeup_fd``), read even while the main thread
-        waits inside a compiled call; the signals are counted here."""
-        with open(read_fd, "rb", buffering=0) as pipe:  # closed when the policy is restored
-            while data := pipe.read(64):
-                self._signalled(data)
+    def _read(self) -> bytes:
+        if self._pipe is None:
+            return b""
+        try:
+            return os.read(self._pipe[0], 64)
+        except OSError:  # BlockingIOError: the other reader took the bytes
+            return b""
 
-    def _signalled(self, data: bytes):
-        for signum in data:
-            self.count += 1
-            self._record(signum)
-            if self.mode == "abandon" or (self.mode == "defer" and self.count > 1):
-                self.abandon(signum)
+    def _handle(self, signum, frame=None):
+        """The Python-level handler (main thread, between bytecodes): act on the bytes now."""
+        self._signalled(self._read())
+
+    def _watch(self, read_fd: int, stop_fd: int):
+        """Act on signal bytes the main thread has not read within ``STUCK_SECONDS``."""
+        while True:
+            ready, _, _ = select.select([read_fd, stop_fd], [], [])
+            if stop_fd in ready:
+                return
+            time.sleep(STUCK_SECONDS)
+            self._signalled(self._read())
 
     # ------------------------------------------------------------------ installation
     def install(self):
@@ -136,21 +154,28 @@ class Policy:
             signal.signal(sig, self._handle)
         if self._previous:
             read_fd, write_fd = os.pipe()
-            os.set_blocking(write_fd, False)
+            stop_read, stop_write = os.pipe()
+            for fd in (read_fd, write_fd):
+                os.set_blocking(fd, False)
             old = signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
-            self._wakeup = (read_fd, write_fd, old)
-            threading.Thread(target=self._watch, args=(read_fd,), daemon=True, name="jaxsplit-signals").start()
+            self._pipe = (read_fd, write_fd, old, stop_read, stop_write)
+            self._watcher = threading.Thread(target=self._watch, args=(read_fd, stop_read), daemon=True,
+                                             name="jaxsplit-signals")
+            self._watcher.start()
         return self
 
     def restore(self):
-        if self._wakeup is not None:
-            _, write_fd, old = self._wakeup
-            signal.set_wakeup_fd(old)
-            os.close(write_fd)  # the watcher reads end-of-file and returns
-            self._wakeup = None
         for sig, previous in self._previous.items():
             signal.signal(sig, previous)
         self._previous = {}
+        if self._pipe is not None:
+            read_fd, write_fd, old, stop_read, stop_write = self._pipe
+            signal.set_wakeup_fd(old)
+            os.write(stop_write, b"x")
+            self._watcher.join()
+            self._pipe = None
+            for fd in (read_fd, write_fd, stop_read, stop_write):
+                os.close(fd)
 
 
 _CURRENT: list[Policy] = []

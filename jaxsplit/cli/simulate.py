@@ -297,7 +297,8 @@ def _report(args, outputs, plan, result):
               file=sys.stderr)
         return EXIT_NONFINITE
     if result.interrupted:
-        print(f"jaxsplit: interrupted after {result.completed:,} of {n_steps:,} steps; kept what was computed"
+        print(f"jaxsplit: interrupted ({_signals.current().signal_name}) after {result.completed:,} of {n_steps:,} "
+              "steps; kept what was computed"
               + (" (written)" if written else ""), file=sys.stderr)
         return _signals.EXIT_INTERRUPTED
     return EXIT_OK

@@ -383,10 +383,10 @@ def _run(args, outputs):
             computed += 1
             done_cases += hi - lo
             progress.update(done_cases)
-    if stop.requested:
+    if skipped + computed < n_chunks:  # stopped by a signal: the finished chunks are on disk
         progress.close()
-        print(f"jaxsplit: interrupted: {skipped + computed} of {n_chunks} chunks are saved in {out}; "
-              f"continue with the same options and --out {out} --resume", file=sys.stderr)
+        print(f"jaxsplit: interrupted ({stop.signal_name}): {skipped + computed} of {n_chunks} chunks are saved in "
+              f"{out}; continue with the same options and --out {out} --resume", file=sys.stderr)
         return _signals.EXIT_INTERRUPTED
     progress.close(done_cases)
     seconds = time.perf_counter() - start
