@@ -43,20 +43,30 @@ class OutputBusy(InputError):
 
 
 def _name_max(directory: Path) -> int:
+    while not os.path.isdir(directory) and directory != directory.parent:
+        directory = directory.parent
     try:
         return os.pathconf(directory, "PC_NAME_MAX")
     except (OSError, ValueError):
         return 255
 
 
-def _resolve(path, what: str) -> Path:
+def resolve(path, what: str) -> Path:
+    """``path`` made absolute with symlinks resolved, every name in it checked for length
+    (a name too long for the file system would fail every probe with an OSError)."""
     text = os.fspath(path)
     if text == "" or "\0" in text:
         raise InputError(f"{what} path {text!r} is not a file name")
     try:
-        return Path(text).expanduser().resolve()
+        p = Path(text).expanduser().resolve()
     except (OSError, RuntimeError) as err:  # a symlink loop
         raise InputError(f"{what} path {text!r} cannot be resolved ({err})") from None
+    limit = _name_max(p.parent)
+    for name in p.parts:
+        if len(os.fsencode(name)) > limit:
+            raise InputError(f"{what} {text[:40]!r}...: a name in it is {len(os.fsencode(name))} bytes long; the file "
+                             f"system allows {limit}")
+    return p
 
 
 class Outputs:
@@ -85,28 +95,25 @@ class Outputs:
         and not existing unless ``force`` (default: the command's ``--force``)."""
         force = self.force if force is None else force
         shown = os.fspath(path)
-        p = _resolve(path, what)
+        p = resolve(path, what)
         given = Path(shown).expanduser()
-        if p.is_dir() or shown.endswith(("/", os.sep)):
+        if os.path.isdir(p) or shown.endswith(("/", os.sep)):
             raise InputError(f"{what} path {shown!r} is a directory; give a file name")
         for other, other_what in self._files.items():
-            if other == p or (p.exists() and other.exists() and os.path.samefile(other, p)):
+            if other == p or (os.path.exists(p) and os.path.exists(other) and os.path.samefile(other, p)):
                 raise InputError(f"{what} {shown!r} is the same file as the {other_what} ({str(other)!r}); "
                                  "give them different names")
         parent = p.parent
-        if not parent.exists():
+        if not os.path.exists(parent):
             raise InputError(f"cannot write {what} {shown!r}: directory {str(parent)!r} does not exist")
-        if not parent.is_dir():
+        if not os.path.isdir(parent):
             raise InputError(f"cannot write {what} {shown!r}: {str(parent)!r} is not a directory")
-        if len(os.fsencode(p.name)) > _name_max(parent):
-            raise InputError(f"{what} file name is {len(os.fsencode(p.name))} bytes long; the file system allows "
-                             f"{_name_max(parent)} ({shown[:40]!r}...)")
         if parent not in self._dirs:  # a claimed directory's lock already covers its files
             lock = parent / f"{TEMP_PREFIX}lock-{hashlib.sha256(os.fsencode(p.name)).hexdigest()[:16]}"
             self._lock(lock, f"{what} {shown!r}")
-        if (p.exists() or given.is_symlink()) and not force:
+        if (os.path.exists(p) or os.path.islink(given)) and not force:
             raise InputError(f"{what} file {shown!r} exists; pass --force to overwrite it or choose another path")
-        if p.exists() and not stat.S_ISREG(p.stat().st_mode):
+        if os.path.exists(p) and not stat.S_ISREG(os.stat(p).st_mode):
             raise InputError(f"{what} {shown!r} exists and is not a regular file; it is never replaced")
         self._files[p] = what
         return p
@@ -115,15 +122,12 @@ class Outputs:
         """Claim an output directory (created if missing) and lock it: the files inside it
         are the command's to write."""
         shown = os.fspath(path)
-        p = _resolve(path, what)
-        if p.exists() and not p.is_dir():
+        p = resolve(path, what)
+        if os.path.exists(p) and not os.path.isdir(p):
             raise InputError(f"{what} {shown!r} exists and is not a directory")
         for other, other_what in self._dirs.items():
             if other == p:
                 raise InputError(f"{what} {shown!r} is the same directory as the {other_what}")
-        if len(os.fsencode(p.name)) > _name_max(p.parent if p.parent.exists() else Path("/")):
-            raise InputError(f"{what} name is {len(os.fsencode(p.name))} bytes long, more than the file system "
-                             f"allows ({shown[:40]!r}...)")
         try:
             p.mkdir(parents=True, exist_ok=True)
         except OSError as err:

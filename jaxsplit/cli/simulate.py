@@ -118,20 +118,21 @@ def _output_paths(args, outputs, when: str):
             return None, None, outputs.file(args.figure, "figure")
         return _default_outputs(args, outputs, when)
     out = Path(args.out).expanduser()
-    if args.out.endswith(("/", os.sep)) or out.is_dir():
-        raise InputError(f"--out {args.out!r} is a directory; give a file name such as {str(out / 'run.npz')!r}")
+    if args.out.endswith(("/", os.sep)) or os.path.isdir(_io.resolve(args.out, "--out")):
+        raise InputError(f"--out {args.out!r} is a directory; give a file name such as "
+                         f"{os.path.join(args.out, 'run.npz')!r}")
     suffix = out.suffix.lower().lstrip(".")
     if suffix in FORMATS:
         fmt = suffix
         if args.format and args.format != fmt:
-            raise InputError(f"--format {args.format} conflicts with the suffix of --out {str(out)!r}")
+            raise InputError(f"--format {args.format} conflicts with the suffix of --out {args.out!r}")
     elif suffix == "" or out.name.endswith("."):
         fmt = args.format or "npz"
         out = out.with_name(out.name.rstrip(".") + "." + fmt)
     elif args.format:
         fmt = args.format
     else:
-        raise InputError(f"--out {str(out)!r}: suffix must be .npz or .csv (or give --format npz|csv)")
+        raise InputError(f"--out {args.out!r}: suffix must be .npz or .csv (or give --format npz|csv)")
     out = outputs.file(out, "trajectory")
     figure = None
     if not args.no_figure:
