@@ -75,12 +75,20 @@ def test_signal_while_parsing_ends_at_once_with_nothing_written(zygote, tmp_path
     assert list(tmp_path.iterdir()) == []
 
 
-def test_fit_interrupted_inside_xla_exits_130_without_crashing(zygote, tmp_path, observations):
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
+def test_fit_interrupted_inside_xla_exits_130_without_crashing(zygote, tmp_path, observations, sig):
     """The fit segfault: the signal arrives while XLA compiles or runs the optimiser."""
     run = zygote.run(["fit", "--data", observations, "--energy", "0.6"], tmp_path,
-                     trigger="during:jaxsplit.explore._fit_inertia:_optimise:0.2", signal="SIGINT")
-    _interrupted(run, "SIGINT")
+                     trigger="during:jaxsplit.explore._fit_inertia:_optimise:0.2", signal=sig)
+    _interrupted(run, sig)
     assert run.stdout == "" and run.seconds < 60
+
+
+def test_check_interrupted_inside_xla_exits_130(zygote, tmp_path):
+    run = zygote.run(["check", "--json"], tmp_path, trigger="during:jaxsplit.checks._order:global_errors:0.2",
+                     signal="SIGTERM")
+    _interrupted(run, "SIGTERM")
+    assert run.stdout == "" and list(tmp_path.iterdir()) == []
 
 
 def test_paper_interrupted_mid_audit_leaves_the_directory_as_it_was(zygote, tmp_path):

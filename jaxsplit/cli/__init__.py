@@ -2,9 +2,11 @@
 
 Each subcommand module exposes ``add_parser(subparsers)`` (which sets ``func``). Bad input
 raises ``InputError`` anywhere below; ``main`` turns it into one line on stderr and exit
-status 2, never a traceback. SIGINT and SIGTERM follow the one policy of ``_signals``
-(installed first, so an interrupt while JAX loads is one line too): exit status 130, with
-finished work written. The CLI runs in float64.
+status 2, never a traceback. SIGINT and SIGTERM follow the one policy of ``_signals``,
+installed first thing in ``main``: exit status 130, with finished work written. (Before
+``main`` runs, Python is still importing ``jaxsplit`` and JAX for the console script; an
+interrupt there gets Python's default behaviour, with nothing written yet.) The CLI runs
+in float64.
 
 Shared pieces, one concept each: ``_args`` (argument types), ``_bounds`` (every size a
 user controls), ``_io`` (the one writer: resolved, locked, atomic outputs; JSON),

@@ -235,13 +235,9 @@ def _prepare_dir(args, outputs, inputs, when) -> tuple[Path, bool]:
     if args.out is None:
         if args.resume:
             raise InputError("--resume needs --out DIR (the directory of the sweep to continue)")
-        k, out = 1, Path(RUNS_DIR) / f"sweep-{when}-{inputs['scheme']}"
-        while out.exists():
-            k += 1
-            out = Path(RUNS_DIR) / f"sweep-{when}-{inputs['scheme']}-{k}"
+        out = _fresh_directory(outputs, f"sweep-{when}-{inputs['scheme']}")
     else:
-        out = Path(args.out).expanduser()
-    out = outputs.directory(out, "--out directory")  # locked: a second sweep into it exits 2 here
+        out = outputs.directory(args.out, "--out directory")  # locked: a second sweep into it exits 2 here
     shown = args.out if args.out is not None else str(out)
     existing = _sweep_files(out)
     if existing and not (args.resume or args.force):
@@ -263,6 +259,20 @@ def _prepare_dir(args, outputs, inputs, when) -> tuple[Path, bool]:
             for p in existing:
                 p.unlink()
     return out, False
+
+
+def _fresh_directory(outputs, stem: str) -> Path:
+    """A new directory ./jaxsplit-runs/STEM[-k], claimed (a run started in the same second
+    with the same scheme holds another one)."""
+    for k in range(1, 10_000):
+        out = Path(RUNS_DIR) / (stem if k == 1 else f"{stem}-{k}")
+        if out.exists():
+            continue
+        try:
+            return outputs.directory(out, "--out directory")
+        except _io.OutputBusy:
+            continue
+    raise InputError(f"no free directory name ./{RUNS_DIR}/{stem}-k; give --out DIR")
 
 
 def _manifest_inputs(manifest: Path) -> dict:
