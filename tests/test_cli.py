@@ -11,7 +11,7 @@ import pytest
 import jaxsplit
 from jaxsplit.cli import COMMANDS, main
 from jaxsplit.cli._chunked import first_nonfinite, run_chunked
-from jaxsplit.cli._io import read_metadata
+from jaxsplit.cli._metadata import read_metadata
 
 # Chunking changes where flows merge across step boundaries: equal up to round-off.
 CHUNK_RTOL = 1e-13

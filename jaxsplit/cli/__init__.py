@@ -9,9 +9,10 @@ interrupt there gets Python's default behaviour, with nothing written yet.) The 
 in float64.
 
 Shared pieces, one concept each: ``_args`` (argument types), ``_bounds`` (every size a
-user controls), ``_io`` (the one writer: resolved, locked, atomic outputs; JSON),
-``_signals`` (the signal policy), ``_progress`` (the progress bar), ``_chunked`` (long
-runs in chunks), ``_problem`` (body, state, scheme and split), ``_figures``.
+user controls), ``_io`` (the one writer: resolved, locked, atomic outputs), ``_metadata``
+(what a run records; JSON on stdout), ``_signals`` (the signal policy), ``_progress`` (the
+progress bar), ``_chunked`` (long runs in chunks), ``_problem`` (body, state, scheme and
+split), ``_figures`` (simulate's figure).
 """
 
 import argparse

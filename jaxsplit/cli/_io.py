@@ -10,28 +10,23 @@ with status 2 instead of mixing its numbers with the first one's. Writing is ato
 temporary file in the same directory, ``fsync``, ``os.replace``) and runs in the signal
 policy's ``critical`` mode, so a file is complete or absent, never half-written. Locks
 and temporary files are removed when the command ends, also when it is abandoned.
-
-Also here: what the commands print or store besides arrays (JSON with non-finite numbers
-as ``null``, metadata of a run).
 """
 
 import contextlib
 import fcntl
 import hashlib
 import json
-import math
 import os
 import shutil
 import stat
-import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 
 from ..core._errors import InputError
 from . import _signals
+from ._metadata import jsonable
 
 DIRECTORY_LOCK = ".jaxsplit-lock"
 TEMP_PREFIX = ".jaxsplit-"
@@ -263,57 +258,3 @@ def _umask() -> int:
     mask = os.umask(0o022)
     os.umask(mask)
     return mask
-
-
-# --------------------------------------------------------------------------- JSON and metadata
-
-
-def jsonable(obj):
-    """Plain JSON types; non-finite floats become None."""
-    if isinstance(obj, dict):
-        return {str(k): jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return jsonable(obj.tolist())
-    if isinstance(obj, (np.bool_, bool)):
-        return bool(obj)
-    if isinstance(obj, (np.integer, int)):
-        return int(obj)
-    if isinstance(obj, (np.floating, float)):
-        return float(obj) if math.isfinite(obj) else None
-    if isinstance(obj, Path):
-        return str(obj)
-    return obj
-
-
-def print_json(obj) -> None:
-    print(json.dumps(jsonable(obj), allow_nan=False))
-
-
-def metadata_array(meta: dict) -> np.ndarray:
-    """Metadata stored inside an ``.npz`` as a JSON string (loads without pickle)."""
-    return np.array(json.dumps(jsonable(meta)))
-
-
-def read_metadata(npz) -> dict:
-    return json.loads(str(npz["metadata"]))
-
-
-def run_metadata(command: str, argv=None) -> dict:
-    import platform
-
-    import jax
-
-    from .. import __version__
-
-    return {
-        "command": command,
-        "argv": list(sys.argv[1:] if argv is None else argv),
-        "jaxsplit_version": __version__,
-        "jax_version": jax.__version__,
-        "numpy_version": np.__version__,
-        "python_version": platform.python_version(),
-        "dtype": "float64",
-        "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-    }

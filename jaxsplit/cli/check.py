@@ -21,7 +21,7 @@ import numpy as np
 from ..checks._order import ORDER_WINDOW
 from ..core._errors import InputError
 from ..systems._rigid_body import PAPER_BODY, PAPER_M0, STANDARD_CASE
-from . import _args, _bounds, _io, _problem, _signals
+from . import _args, _bounds, _metadata, _problem, _signals
 
 POISSON_TOL = 1e-12  # a Poisson map's defect is round-off: ~1e-16 per unit of |m|
 ORDER_TOL = 0.3  # |measured - nominal order| allowed
@@ -182,7 +182,7 @@ def _check_motion(m0, inertia, t_end):
 
 def _print(args, r, order_ok):
     if args.json:
-        _io.print_json(r)
+        _metadata.print_json(r)
         return
     print(f"jaxsplit check: {r['scheme']} (nominal order {r['nominal_order']}), {r['split']} split"
           + (f" (shift axis {r['shift_axis']})" if r["split"] == "casimir" else "")

@@ -20,7 +20,7 @@ import numpy as np
 from ..core._errors import InputError
 from ..explore._fit import substeps
 from ..explore._fit_inertia import fit_inertia
-from . import _args, _bounds, _io, _signals
+from . import _args, _bounds, _metadata, _signals
 
 # Each Adam or L-BFGS iteration runs the model forward and backward; at 10^6 model steps per
 # evaluation a fit already takes hours on a CPU core.
@@ -135,7 +135,7 @@ def _print(args, res, t):
                                          for row in res.ratio_range.tolist()],
             "seconds": res.seconds,
         }
-        print(json.dumps(_io.jsonable(out), allow_nan=False))
+        print(json.dumps(_metadata.jsonable(out), allow_nan=False))
         return
     r, s = res.inertia_ratios, res.ratio_std
     print(f"fit of {len(t)} observations over t in [{t[0]:g}, {t[-1]:g}] in {res.seconds:.1f} s, "

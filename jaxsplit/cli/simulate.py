@@ -19,7 +19,7 @@ import numpy as np
 
 from ..core._errors import InputError
 from ..systems._rigid_body import PAPER_BODY, PAPER_M0
-from . import _args, _bounds, _chunked, _io, _problem, _progress, _signals
+from . import _args, _bounds, _chunked, _io, _metadata, _problem, _progress, _signals
 
 EXIT_OK = 0
 EXIT_NONFINITE = 3
@@ -264,7 +264,7 @@ def _report(args, outputs, plan, result):
     }
 
     # ---- outputs (also, and especially, for a stopped run: never lose work)
-    meta = _io.run_metadata("simulate") | {
+    meta = _metadata.run_metadata("simulate") | {
         k: summary[k] for k in ("scheme", "order", "split", "shift_axis", "inertia", "m0", "dt",
                                 "steps_requested", "save_every", "status", "nonfinite_step")
     } | {"steps_completed": result.completed, "allow_nonphysical": args.allow_nonphysical}
@@ -288,7 +288,7 @@ def _report(args, outputs, plan, result):
     summary["outputs"] = written
 
     if args.json:
-        _io.print_json(summary)
+        _metadata.print_json(summary)
     else:
         _print_summary(summary, axis)
     if result.nonfinite_step is not None:
@@ -307,7 +307,7 @@ def _report(args, outputs, plan, result):
 
 def _write_trajectory(outputs, path, fmt, arrays, meta):
     if fmt == "npz":
-        outputs.write_npz(path, arrays | {"metadata": _io.metadata_array(meta)})
+        outputs.write_npz(path, arrays | {"metadata": _metadata.metadata_array(meta)})
         return
     import json
 
@@ -316,7 +316,7 @@ def _write_trajectory(outputs, path, fmt, arrays, meta):
     columns += [("energy", arrays["energy"]), ("casimir", arrays["casimir"])]
     if "m_exact" in arrays:
         columns += [(f"m{i + 1}_exact", arrays["m_exact"][:, i]) for i in range(3)]
-    header = "metadata: " + json.dumps(_io.jsonable(meta)) + "\n" + ",".join(name for name, _ in columns)
+    header = "metadata: " + json.dumps(_metadata.jsonable(meta)) + "\n" + ",".join(name for name, _ in columns)
     data = np.column_stack([np.asarray(v, dtype=np.float64) for _, v in columns])
     fmts = ["%d"] + ["%.17g"] * (len(columns) - 1)
     outputs.write(path, lambda f: np.savetxt(f, data, delimiter=",", header=header, fmt=fmts, comments="# "))

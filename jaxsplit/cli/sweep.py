@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core._errors import InputError
-from . import _args, _bounds, _io, _progress, _signals
+from . import _args, _bounds, _io, _metadata, _progress, _signals
 
 MANIFEST = "manifest.json"
 RESULTS = "results.npz"
@@ -247,7 +247,7 @@ def _prepare_dir(args, outputs, inputs, when) -> tuple[Path, bool]:
     manifest = out / MANIFEST
     if args.resume and manifest.exists():
         old_inputs = _manifest_inputs(manifest)
-        new = json.loads(json.dumps(_io.jsonable(inputs)))
+        new = json.loads(json.dumps(_metadata.jsonable(inputs)))
         if old_inputs != new:
             diff = sorted(k for k in set(old_inputs) | set(new) if old_inputs.get(k) != new.get(k))
             shown_diff = "; ".join(f"{k}: was {old_inputs.get(k)!r}, now {new.get(k)!r}" for k in diff)
@@ -290,7 +290,7 @@ def _manifest_inputs(manifest: Path) -> dict:
 
 
 def _inputs_digest(inputs: dict) -> str:
-    text = json.dumps(_io.jsonable(inputs), sort_keys=True)
+    text = json.dumps(_metadata.jsonable(inputs), sort_keys=True)
     return hashlib.sha256(f"jaxsplit-sweep-{FORMAT_VERSION}:{text}".encode()).hexdigest()
 
 
@@ -365,7 +365,7 @@ def _run(args, outputs):
     done = {k for k, (lo, hi) in enumerate(bounds) if _proven_chunk(_chunk_path(out, k), lo, hi, cases, digest)
             is not None}
     if not resumed:
-        meta = _io.run_metadata("sweep")
+        meta = _metadata.run_metadata("sweep")
         manifest = {"format": FORMAT_VERSION, "inputs": inputs, "inputs_digest": digest, "n_cases": n,
                     "n_chunks": n_chunks, "jaxsplit_version": meta["jaxsplit_version"],
                     "jax_version": meta["jax_version"], "created_utc": meta["created_utc"]}
@@ -405,7 +405,7 @@ def _run(args, outputs):
         summary = _summary(merged, inputs, n, n_chunks, computed, skipped, seconds, out)
         outputs.write_json(out / SUMMARY, summary)
         if args.json:
-            _io.print_json(summary)
+            _metadata.print_json(summary)
         else:
             _print_summary(summary)
     return 0
@@ -425,8 +425,8 @@ def _merge(outputs, out: Path, cases: dict, bounds, inputs: dict, digest: str) -
         parts.append(part)
     results = {f"case_{k}": np.asarray(v) for k, v in cases.items()}
     results |= {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
-    meta = _io.run_metadata("sweep") | {"inputs": inputs, "inputs_digest": digest}
-    outputs.write_npz(out / RESULTS, results | {"metadata": _io.metadata_array(meta)})
+    meta = _metadata.run_metadata("sweep") | {"inputs": inputs, "inputs_digest": digest}
+    outputs.write_npz(out / RESULTS, results | {"metadata": _metadata.metadata_array(meta)})
     return results
 
 
