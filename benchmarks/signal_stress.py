@@ -202,7 +202,7 @@ def main():
         proc.send_signal(getattr(signal, sig))
         _out, err = proc.communicate()
         rc = proc.returncode
-        before_main = rc in (-signal.SIGINT, -signal.SIGTERM)
+        before_main = rc not in (0, 130) and "jaxsplit:" not in err  # main never ran its policy
         entry.append({"trial": i, "signal": sig, "delay_s": round(delay, 3), "returncode": rc,
                       "traceback": "Traceback" in err, "before_main": before_main,
                       "phase": "before main (importing jaxsplit/JAX)" if before_main else _phase(rc, err),
@@ -248,8 +248,9 @@ def _markdown(record) -> str:
             lines.append(f"| {e['trial']} | {e['signal']} | {e['delay_s']} | {e['returncode']} | {e['phase']} | "
                          f"{'yes' if e['traceback'] else 'no'} |")
         lines += ["", (f"{len(before)} of {len(entry)} signals arrived before `main` ran (Python importing `jaxsplit`, "
-                  "hence JAX): there Python's defaults apply (SIGINT: a KeyboardInterrupt traceback, exit -2; "
-                  "SIGTERM: exit -15), nothing was written. This window is outside `jaxsplit/cli`: the console "
+                  "hence JAX): there Python's defaults apply (SIGINT: a KeyboardInterrupt traceback, exit -2 or 1, or "
+                  "an abort (-6) when it lands inside an extension module's import; SIGTERM: exit -15), nothing was "
+                  "written. This window is outside `jaxsplit/cli`: the console "
                   "script imports the whole package before `main` (see the report of this change)."), ""]
     return "\n".join(lines) + "\n"
 

@@ -9,6 +9,7 @@ moment (``Zygote.signal``: the stress runs), or from inside at a chosen phase (a
 ``trigger``: the deterministic tests), by ``os.kill`` of the child itself:
 
 * ``parse``: while the arguments are parsed (nothing started);
+* ``after-main``: after ``main`` returned, while the process exits;
 * ``call:MODULE:NAME:N``: just before the N-th call of ``MODULE.NAME`` (e.g. the N-th
   chunk of a run, or the N-th file written);
 * ``during:MODULE:NAME:SECONDS``: SECONDS after the first call of ``MODULE.NAME`` began,
@@ -48,6 +49,14 @@ def serve():
 
 def arm(trigger, sig):
     kind, _, rest = trigger.partition(":")
+    if kind == "after-main":
+        real_main = jaxsplit.cli.main
+        def main():
+            status = real_main()
+            os.kill(os.getpid(), sig)
+            return status
+        jaxsplit.cli.main = main
+        return
     if kind == "parse":
         real = jaxsplit.cli.build_parser
         def build_parser():
@@ -85,7 +94,8 @@ null = os.open(os.devnull, os.O_RDONLY)
 os.dup2(null, 0)
 if req.get("trigger"):
     arm(req["trigger"], getattr(signal, req["signal"]))
-sys.exit(jaxsplit.cli.main(req["argv"]))
+sys.argv = ["jaxsplit", *req["argv"]]
+sys.exit(jaxsplit.cli.main())  # as the console script calls it
 """
 
 

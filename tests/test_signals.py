@@ -177,6 +177,14 @@ def test_fit_interrupted_while_printing_prints_the_whole_result(sig, monkeypatch
     assert captured.err.strip().endswith("after the work was done; every output is complete")
 
 
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
+def test_a_signal_after_main_returned_changes_nothing(zygote, tmp_path, sig):
+    """The process's status is decided once ``main`` returns: a late signal is ignored, not a
+    KeyboardInterrupt during interpreter teardown (found by the stress script)."""
+    run = zygote.run(["schemes"], tmp_path, trigger="after-main", signal=sig)
+    assert run.returncode == 0 and run.stderr == "" and "strang" in run.stdout
+
+
 # ------------------------------------------------------------------ concurrency
 @pytest.mark.parametrize("argv", [SWEEP + ["--out", "shared"],
                                   SIMULATE[:1] + ["--steps", "2e6", "--save-every", "1000", "--no-figure", "--out", "x.npz"]],

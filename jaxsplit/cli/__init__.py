@@ -76,7 +76,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    with _signals.policy() as stop:
+    """Run the command line on ``argv`` (default: ``sys.argv[1:]``, the process's own
+    arguments: then ``main`` is the process, and signals arriving after it returns are
+    ignored so that they cannot change the exit status it decided)."""
+    with _signals.policy(owns_process=argv is None) as stop:
         import jax
 
         jax.config.update("jax_enable_x64", True)

@@ -164,9 +164,12 @@ class Policy:
             self._watcher.start()
         return self
 
-    def restore(self):
+    def restore(self, *, ignore: bool = False):
+        """Put the previous handlers back, or with ``ignore`` ignore the signals from now on
+        (the process is about to exit with its status decided: a late signal must not turn
+        it into a KeyboardInterrupt during teardown)."""
         for sig, previous in self._previous.items():
-            signal.signal(sig, previous)
+            signal.signal(sig, signal.SIG_IGN if ignore else previous)
         self._previous = {}
         if self._pipe is not None:
             read_fd, write_fd, old, stop_read, stop_write = self._pipe
@@ -182,15 +185,16 @@ _CURRENT: list[Policy] = []
 
 
 @contextlib.contextmanager
-def policy():
-    """Install the policy for one command-line run (``main``) and restore the handlers after."""
+def policy(*, owns_process: bool = False):
+    """Install the policy for one command-line run (``main``); afterwards restore the
+    handlers, or, when the run is the whole process, ignore the signals until it exits."""
     p = Policy().install()
     _CURRENT.append(p)
     try:
         yield p
     finally:
         _CURRENT.pop()
-        p.restore()
+        p.restore(ignore=owns_process)
 
 
 def current() -> Policy:
