@@ -260,7 +260,7 @@ def test_ctrl_c_keeps_the_finished_chunks(capsys, tmp_path, monkeypatch):
     out = tmp_path / "part.npz"
     rc = main(["simulate", "--steps", "10000", "--save-every", "10", "--out", str(out), "--no-figure"])
     captured = capsys.readouterr()
-    assert rc == 130 and "interrupted after 3,000 of 10,000 steps" in captured.err
+    assert rc == 130 and "interrupted (SIGINT) after 3,000 of 10,000 steps" in captured.err
     with np.load(out) as z:
         assert z["step"][-1] == 3000 and len(z["step"]) == 301
         assert read_metadata(z)["status"] == "interrupted"
