@@ -10,7 +10,8 @@ import pytest
 
 import jaxsplit
 from jaxsplit.cli import COMMANDS, main
-from jaxsplit.cli._common import first_nonfinite, read_metadata, run_chunked
+from jaxsplit.cli._chunked import first_nonfinite, run_chunked
+from jaxsplit.cli._metadata import read_metadata
 
 # Chunking changes where flows merge across step boundaries: equal up to round-off.
 CHUNK_RTOL = 1e-13
@@ -240,24 +241,28 @@ def test_figure_is_a_png_of_legible_size(capsys, tmp_path):
 
 
 def test_ctrl_c_keeps_the_finished_chunks(capsys, tmp_path, monkeypatch):
+    """A real SIGINT during the third chunk: that chunk finishes, the run stops, all is written."""
+    import os
+    import signal
+
     import jaxsplit.core._integrate as integrate_module
 
     real, calls = integrate_module.integrate, []
 
-    def interrupted_on_third_chunk(*args, **kwargs):
+    def interrupted_during_third_chunk(*args, **kwargs):
         calls.append(args[3])
         if len(calls) == 3:
-            raise KeyboardInterrupt
+            os.kill(os.getpid(), signal.SIGINT)  # the policy defers it: the chunk completes
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(integrate_module, "integrate", interrupted_on_third_chunk)
-    monkeypatch.setattr("jaxsplit.cli._common.TARGET_FLOWS_PER_CHUNK", 3000)  # 1000 lie-trotter steps
+    monkeypatch.setattr(integrate_module, "integrate", interrupted_during_third_chunk)
+    monkeypatch.setattr("jaxsplit.cli._chunked.TARGET_FLOWS_PER_CHUNK", 3000)  # 1000 lie-trotter steps
     out = tmp_path / "part.npz"
     rc = main(["simulate", "--steps", "10000", "--save-every", "10", "--out", str(out), "--no-figure"])
     captured = capsys.readouterr()
-    assert rc == 130 and "interrupted after 2,000 of 10,000 steps" in captured.err
+    assert rc == 130 and "interrupted (SIGINT) after 3,000 of 10,000 steps" in captured.err
     with np.load(out) as z:
-        assert z["step"][-1] == 2000 and len(z["step"]) == 201
+        assert z["step"][-1] == 3000 and len(z["step"]) == 301
         assert read_metadata(z)["status"] == "interrupted"
 
 
@@ -296,14 +301,14 @@ def test_memory_refusal_suggests_a_save_every_that_fits():
     import re
 
     from jaxsplit import InputError
-    from jaxsplit.cli._common import check_memory
+    from jaxsplit.cli._bounds import saved_states
     from jaxsplit.cli.simulate import BYTES_PER_SAVED
 
     steps, limit = 10**9, 2**20
     with pytest.raises(InputError) as err:
-        check_memory(steps + 2, BYTES_PER_SAVED, limit, steps=steps, save_every=1)
+        saved_states(steps, 1, BYTES_PER_SAVED, limit)
     k = int(re.search(r"--save-every (\d+)", str(err.value)).group(1))
-    check_memory(steps // k + 2, BYTES_PER_SAVED, limit, steps=steps, save_every=k)  # fits: no error
+    saved_states(steps, k, BYTES_PER_SAVED, limit)  # fits: no error
 
 
 @pytest.mark.parametrize("save_every,chunk", [(100, 300), (5000, 100)])

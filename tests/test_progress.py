@@ -13,7 +13,7 @@ import time
 import pytest
 
 from jaxsplit.cli import main
-from jaxsplit.cli._common import Progress
+from jaxsplit.cli._progress import Progress
 
 # Lie-Trotter runs ~6e6 steps/s on one idle CPU core: 2e7 steps take ~3 s (plus start-up).
 LONG_RUN = ["simulate", "--steps", "2e7", "--save-every", "1000", "--no-save"]
@@ -55,7 +55,7 @@ def test_quick_runs_stay_silent():
 
 
 def test_simulate_wires_the_bar_to_stderr_and_quiet(monkeypatch, capsys):
-    monkeypatch.setattr("jaxsplit.cli._common.PROGRESS_DELAY", 0.0)  # draw even for this quick run
+    monkeypatch.setattr("jaxsplit.cli._progress.PROGRESS_DELAY", 0.0)  # draw even for this quick run
     for quiet in (False, True):
         fake = _Terminal()
         monkeypatch.setattr(sys, "stderr", fake)

@@ -2,15 +2,25 @@
 
 Each subcommand module exposes ``add_parser(subparsers)`` (which sets ``func``). Bad input
 raises ``InputError`` anywhere below; ``main`` turns it into one line on stderr and exit
-status 2, never a traceback. The CLI runs in float64.
+status 2, never a traceback. SIGINT and SIGTERM follow the one policy of ``_signals``,
+installed first thing in ``main``: exit status 130, with finished work written. (Before
+``main`` runs, Python is still importing ``jaxsplit`` and JAX for the console script; an
+interrupt there gets Python's default behaviour, with nothing written yet.) The CLI runs
+in float64.
+
+Shared pieces, one concept each: ``_args`` (argument types), ``_bounds`` (every size a
+user controls), ``_io`` (the one writer: resolved, locked, atomic outputs), ``_metadata``
+(what a run records; JSON on stdout), ``_signals`` (the signal policy), ``_progress`` (the
+progress bar), ``_chunked`` (long runs in chunks), ``_problem`` (body, state, scheme and
+split), ``_figures`` (simulate's figure).
 """
 
 import argparse
 import importlib
-import re
 import sys
 
 from ..core._errors import InputError
+from . import _args, _signals
 
 COMMANDS = ("simulate", "schemes", "check", "sweep", "fit", "paper")
 
@@ -29,17 +39,12 @@ nothing run); 3 the state became non-finite (what was computed is kept); 130 int
 (finished work is kept; `sweep --resume` continues).
 """
 
-# argparse treats "-0.6,0,0.8" as an option; these parsers have no option that looks
-# like a number, so anything starting with "-digit" or "-.digit" is a value.
-_NEGATIVE_NUMBER = re.compile(r"^-\.?\d")
-
-
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors (exit status 2) instead of usage dumps."""
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        self._negative_number_matcher = _NEGATIVE_NUMBER
+        self._negative_number_matcher = _args.NEGATIVE_NUMBER
 
     def error(self, message):
         raise InputError(f"{self.prog}: {message}")
@@ -71,24 +76,33 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    import jax
+    """Run the command line on ``argv`` (default: ``sys.argv[1:]``, the process's own
+    arguments: then ``main`` is the process, and signals arriving after it returns are
+    ignored so that they cannot change the exit status it decided)."""
+    with _signals.policy(owns_process=argv is None) as stop:
+        import jax
 
-    jax.config.update("jax_enable_x64", True)
-    try:
-        parser = build_parser()
-        args = parser.parse_args(argv)
-        if args.command is None:
-            parser.print_help()
+        jax.config.update("jax_enable_x64", True)
+        try:
+            parser = build_parser()
+            args = parser.parse_args(argv)
+            if args.command is None:
+                parser.print_help()
+                return 0
+            status = args.func(args) or 0
+        except InputError as err:
+            print(f"jaxsplit: error: {_one_line(err)}", file=sys.stderr)
+            return 2
+        except _signals.Interrupted as stopped:
+            print(f"jaxsplit: interrupted ({stopped}); nothing was left half-written", file=sys.stderr)
+            return _signals.EXIT_INTERRUPTED
+        except BrokenPipeError:  # `jaxsplit schemes | head`
             return 0
-        return args.func(args) or 0
-    except InputError as err:
-        print(f"jaxsplit: error: {_one_line(err)}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("jaxsplit: interrupted", file=sys.stderr)
-        return 130
-    except BrokenPipeError:  # `jaxsplit schemes | head`
-        return 0
+        if stop.requested and status == 0:  # the signal came while the outputs were written: they are complete
+            print(f"jaxsplit: interrupted ({stop.signal_name}) after the work was done; "
+                  "every output is complete", file=sys.stderr)
+            return _signals.EXIT_INTERRUPTED
+        return status
 
 
 def _one_line(err) -> str:

@@ -7,6 +7,11 @@
   reference is the exact solution for a symmetric body, the 30-digit value for the standard
   case, and otherwise a Casimir-split 8th-order run whose own error is estimated (step
   halving) and reported.
+
+Sizes are bounded up front (``_bounds``): the random states, the ladder's largest step
+count, the scheme's stages. An order needs motion: a state that turns by less than
+``MIN_MOTION`` radians over ``--t-end`` (a vanishing state, an equilibrium, a vanishing
+time) is refused, since every error would sit at round-off and read as "exact".
 """
 
 import argparse
@@ -16,7 +21,7 @@ import numpy as np
 from ..checks._order import ORDER_WINDOW
 from ..core._errors import InputError
 from ..systems._rigid_body import PAPER_BODY, PAPER_M0, STANDARD_CASE
-from . import _common as c
+from . import _args, _bounds, _metadata, _problem, _signals
 
 POISSON_TOL = 1e-12  # a Poisson map's defect is round-off: ~1e-16 per unit of |m|
 ORDER_TOL = 0.3  # |measured - nominal order| allowed
@@ -44,24 +49,27 @@ def add_parser(sub):
     p.add_argument("--split", choices=("axes", "casimir"), default="axes", help="(default axes)")
     p.add_argument("--shift-axis", choices=("auto", "1", "2", "3"), default=None,
                    help="axis of the Casimir shift, with --split casimir (default auto)")
-    p.add_argument("--inertia", type=c.vector3("--inertia", "I1,I2,I3"), default=PAPER_BODY, metavar="I1,I2,I3",
-                   help=f"(default {c.fmt_vec(PAPER_BODY)})")
-    p.add_argument("--m0", type=c.vector3("--m0"), default=PAPER_M0, metavar="A,B,C",
-                   help=f"initial state of the order measurement (default {c.fmt_vec(PAPER_M0)})")
+    p.add_argument("--inertia", type=_args.vector3("--inertia", "I1,I2,I3"), default=PAPER_BODY, metavar="I1,I2,I3",
+                   help=f"(default {_problem.fmt_vec(PAPER_BODY)})")
+    p.add_argument("--m0", type=_args.vector3("--m0"), default=PAPER_M0, metavar="A,B,C",
+                   help=f"initial state of the order measurement (default {_problem.fmt_vec(PAPER_M0)})")
     p.add_argument("--allow-nonphysical", action="store_true", help="accept bodies violating the triangle inequalities")
-    p.add_argument("--dt", type=c.nonzero_float, default=0.1, metavar="H", help="step of the Poisson check (default 0.1)")
-    p.add_argument("--states", type=c.positive_int, default=32, metavar="N",
+    p.add_argument("--dt", type=_args.nonzero_float, default=0.1, metavar="H", help="step of the Poisson check (default 0.1)")
+    p.add_argument("--states", type=_args.positive_int, default=32, metavar="N",
                    help="random unit states of the Poisson check (default 32)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the random states (default 0)")
-    p.add_argument("--t-end", type=c.positive_float, default=10.0, metavar="T",
+    p.add_argument("--seed", type=_args.seed, default=0, help="seed of the random states (default 0)")
+    p.add_argument("--t-end", type=_args.positive_float, default=10.0, metavar="T",
                    help="time of the order measurement (default 10)")
-    p.add_argument("--start", type=c.positive_int, metavar="N",
+    p.add_argument("--start", type=_args.positive_int, metavar="N",
                    help="smallest step count of the ladder (default by order: 2000 for order 1 ... 4 for 10)")
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.set_defaults(func=run)
 
 
-MAX_COUNT = 2**17  # largest step count of an adapted ladder (12 x 2^17 saved states ~ 38 MB)
+MAX_COUNT = 2**17  # largest step count of a ladder (12 runs saving every step: 12 x 2^17 states ~ 38 MB)
+LADDER_FACTOR = 16  # a ladder spans start .. 16 x start
+MAX_STATES = 100_000  # the Poisson check takes jacfwd of every random state in one batch (~1 KiB each)
+MIN_MOTION = 0.1  # radians the state must turn over --t-end for an order (or exactness) to be measurable
 
 
 def _measure_order(step, m0, t_end, reference, start, adapt=True):
@@ -99,12 +107,18 @@ def run(args):
     from ..systems._rigid_body import symmetric_solution
     from ..systems._splitting import splitting
 
-    body = c.check_body(args.inertia, args.allow_nonphysical)
-    scheme, shift = c.resolve_scheme_and_shift(args, body)
-    m0 = jnp.asarray(args.m0, dtype=jnp.float64)
-    if not np.any(np.asarray(args.m0)):
+    body = _problem.body(args.inertia, args.allow_nonphysical)
+    scheme, shift = _problem.scheme_and_shift(args, body)
+    m0_np = _problem.initial_state(args.m0, args.inertia)
+    if not np.any(m0_np):
         raise InputError("--m0 must be non-zero (the order is measured on a moving state)")
-    kwargs = c.split_options(args.split, shift)
+    _check_motion(m0_np, np.asarray(args.inertia, dtype=np.float64), args.t_end)
+    _bounds.at_most(args.states, MAX_STATES, "--states", "the Poisson check takes jacfwd of all states in one batch")
+    if args.start is not None:
+        _bounds.at_most(args.start, MAX_COUNT // LADDER_FACTOR, "--start",
+                        f"its ladder runs up to {LADDER_FACTOR} x --start steps, saving every step")
+    m0 = jnp.asarray(m0_np)
+    kwargs = _problem.split_options(args.split, shift)
     step = splitting(body, scheme, args.split, **kwargs)
 
     # ---- Poisson defect over random unit states
@@ -150,20 +164,38 @@ def run(args):
         "t_end": t_end, "step_counts": list(counts), "step_sizes": hs, "errors": errs,
         "reference": ref_kind, "reference_accuracy": ref_acc,
     }
+    with _signals.current().critical():  # the measurements are done: print them whole
+        _print(args, result, order_ok)
+    return 0 if (poisson_ok and (order_ok or exact_split)) else EXIT_FAILED
+
+
+def _check_motion(m0, inertia, t_end):
+    """Refuse a run whose state hardly moves: |m0 x I^-1 m0| t_end / |m0| < MIN_MOTION."""
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+        turn = float(np.linalg.norm(np.cross(m0, m0 / inertia)) * t_end / np.linalg.norm(m0))
+    if not turn >= MIN_MOTION:
+        what = ("--m0 is an equilibrium of this body (m0 x I^-1 m0 = 0)" if not np.any(np.cross(m0, m0 / inertia))
+                else f"the state turns by only {turn:.2g} rad over --t-end {t_end:g}")
+        raise InputError(f"{what}: no order can be measured (every error would be round-off); the check needs "
+                         f">= {MIN_MOTION:g} rad: a longer --t-end, or an --m0 off the equilibria")
+
+
+def _print(args, r, order_ok):
     if args.json:
-        c.print_json(result)
+        _metadata.print_json(r)
+        return
+    print(f"jaxsplit check: {r['scheme']} (nominal order {r['nominal_order']}), {r['split']} split"
+          + (f" (shift axis {r['shift_axis']})" if r["split"] == "casimir" else "")
+          + f", I = ({_problem.fmt_vec(r['inertia'])})")
+    print(f"  Poisson defect, h = {r['poisson_dt']:g}, {r['poisson_states']} random unit states: max "
+          f"{r['poisson_defect_max']:.2e} (median {r['poisson_defect_median']:.2e}) -> "
+          f"{'Poisson to round-off' if r['poisson_ok'] else 'NOT Poisson'} (tolerance {POISSON_TOL:g})")
+    counts = r["step_counts"]
+    if r["measured_order"] is not None:
+        print(f"  measured order {r['measured_order']:.3f} from {r['order_points_used']} of {len(counts)} step "
+              f"counts ({counts[0]}..{counts[-1]}) to t = {r['t_end']:g} -> "
+              f"{'agrees' if order_ok else 'DISAGREES'} (tolerance {ORDER_TOL})")
     else:
-        print(f"jaxsplit check: {scheme.name} (nominal order {scheme.order}), {args.split} split"
-              + (f" (shift axis {shift})" if args.split == "casimir" else "")
-              + f", I = ({c.fmt_vec(args.inertia)})")
-        print(f"  Poisson defect, h = {args.dt:g}, {args.states} random unit states: max {defects[worst]:.2e} "
-              f"(median {np.median(defects):.2e}) -> {'Poisson to round-off' if poisson_ok else 'NOT Poisson'} "
-              f"(tolerance {POISSON_TOL:g})")
-        if order_fit is not None:
-            print(f"  measured order {order_fit.order:.3f} from {int(order_fit.used.sum())} of {len(counts)} step "
-                  f"counts ({counts[0]}..{counts[-1]}) to t = {t_end:g} -> "
-                  f"{'agrees' if order_ok else 'DISAGREES'} (tolerance {ORDER_TOL})")
-        else:
-            print(f"  order: {note}")
-        print(f"  reference: {ref_kind}" + (f", accuracy {ref_acc:.1e}" if ref_acc else ""))
-    return c.EXIT_OK if (poisson_ok and (order_ok or exact_split)) else EXIT_FAILED
+        print(f"  order: {r['order_note']}")
+    print(f"  reference: {r['reference']}" + (f", accuracy {r['reference_accuracy']:.1e}"
+                                               if r["reference_accuracy"] else ""))

@@ -3,6 +3,12 @@
 m(t) determines only the differences 1/I_i − 1/I_j; one more number fixes the rest: the
 kinetic energy (``--energy`` or an ``energy`` entry in the file) or I1 (``--inertia1`` or
 an ``inertia1`` entry). Without either, I1 = 1 is assumed and the output says so.
+
+The data file is checked whole before anything compiles (an ``.npz`` with real, finite t
+(n,) strictly increasing and m (n, 3); data that determine no inertia are refused by the
+library), and the model's work is bounded (``MAX_MODEL_STEPS`` per evaluation). Nothing
+finished would be lost by stopping a fit part-way, so SIGINT/SIGTERM end it at once
+(exit 130); the result, once computed, is printed whole.
 """
 
 import json
@@ -12,7 +18,13 @@ import zipfile
 import numpy as np
 
 from ..core._errors import InputError
+from ..explore._fit import substeps
 from ..explore._fit_inertia import fit_inertia
+from . import _args, _bounds, _metadata, _signals
+
+# Each Adam or L-BFGS iteration runs the model forward and backward; at 10^6 model steps per
+# evaluation a fit already takes hours on a CPU core.
+MAX_MODEL_STEPS = 10**6
 
 EXAMPLES = """examples:
   jaxsplit fit --data obs.npz                    # assumes I1 = 1 and says so
@@ -29,11 +41,11 @@ def add_parser(sub):
                        description=__doc__.split(": ", 1)[1].replace("``", ""), epilog=EXAMPLES,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--data", required=True, help="obs.npz holding t (n,) and m (n, 3)")
-    p.add_argument("--energy", type=float, default=None, help="known kinetic energy (fixes the gauge)")
-    p.add_argument("--energy-sigma", type=float, default=0.0, help="standard deviation of --energy")
-    p.add_argument("--inertia1", type=float, default=None, help="known I1 (fixes the gauge)")
+    p.add_argument("--energy", type=_args.positive_float, default=None, help="known kinetic energy (fixes the gauge)")
+    p.add_argument("--energy-sigma", type=_args.nonnegative_float, default=0.0, help="standard deviation of --energy")
+    p.add_argument("--inertia1", type=_args.positive_float, default=None, help="known I1 (fixes the gauge)")
     p.add_argument("--scheme", default="kahan-li-6", help="integrator of the model (Casimir split)")
-    p.add_argument("--max-step", type=float, default=0.05, help="largest model step")
+    p.add_argument("--max-step", type=_args.positive_float, default=0.05, help="largest model step")
     p.add_argument("--fixed-m0", action="store_true", help="take m0 = the first observation")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=run)
@@ -54,21 +66,27 @@ def _scalar(data, key):
 def load_observations(path: str):
     """(t, m, energy | None, inertia1 | None) from an .npz file; malformed -> InputError."""
     try:
-        with np.load(path, allow_pickle=False) as data:
-            missing = [k for k in ("t", "m") if k not in data]
+        data = np.load(path, allow_pickle=False)
+    except FileNotFoundError as err:
+        raise InputError(f"no such data file: {path}") from err
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as err:
+        raise InputError(f"{path} is not a readable .npz file ({type(err).__name__})") from err
+    if not isinstance(data, np.lib.npyio.NpzFile):  # an .npy file: one bare array
+        raise InputError(f"{path} holds a single array (.npy); expected an .npz holding t (n,) and m (n, 3)")
+    try:
+        with data:
+            missing = [k for k in ("t", "m") if k not in data.files]
             if missing:
                 raise InputError(f"{path}: missing array(s) {missing}; expected t (n,) and m (n, 3)")
             t, m = np.asarray(data["t"]), np.asarray(data["m"])
             energy, inertia1 = _scalar(data, "energy"), _scalar(data, "inertia1")
-    except FileNotFoundError as err:
-        raise InputError(f"no such data file: {path}") from err
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as err:
         if isinstance(err, InputError):
             raise
         raise InputError(f"{path} is not a readable .npz file ({type(err).__name__})") from err
     for name, arr in (("t", t), ("m", m)):
-        if not np.issubdtype(arr.dtype, np.number):
-            raise InputError(f"{path}: {name} must be numeric, got dtype {arr.dtype}")
+        if not np.issubdtype(arr.dtype, np.number) or np.issubdtype(arr.dtype, np.complexfloating):
+            raise InputError(f"{path}: {name} must be real numbers (numeric, not complex), got dtype {arr.dtype}")
     if t.ndim != 1:
         raise InputError(f"{path}: t must have shape (n,), got {t.shape}")
     if m.shape != (len(t), 3):
@@ -81,6 +99,11 @@ def load_observations(path: str):
 
 def run(args):
     t, m, energy, inertia1 = load_observations(args.data)
+    scheme = _bounds.scheme(args.scheme)
+    if len(t) >= 2 and np.all(np.diff(t) > 0):  # else fit_inertia names the problem
+        _bounds.at_most((len(t) - 1) * substeps(t, args.max_step), MAX_MODEL_STEPS,
+                        "the model's steps per evaluation ((n - 1) intervals x ceil(longest interval / --max-step))",
+                        "every iteration runs them forward and backward", "use a larger --max-step")
     energy = args.energy if args.energy is not None else energy
     inertia1 = args.inertia1 if args.inertia1 is not None else inertia1
     if args.energy is not None and args.inertia1 is None:
@@ -88,7 +111,13 @@ def run(args):
     elif args.inertia1 is not None and args.energy is None:
         energy = None
     res = fit_inertia(t, m, energy=energy, energy_sigma=args.energy_sigma, inertia1=inertia1,
-                      fit_m0=not args.fixed_m0, scheme=args.scheme, max_step=args.max_step)
+                      fit_m0=not args.fixed_m0, scheme=scheme, max_step=args.max_step)
+    with _signals.current().critical():  # the fit is done: print it whole
+        _print(args, res, t)
+    return 0
+
+
+def _print(args, res, t):
     if args.json:
         out = {
             "inertia_ratios": res.inertia_ratios.tolist(),
@@ -106,8 +135,8 @@ def run(args):
                                          for row in res.ratio_range.tolist()],
             "seconds": res.seconds,
         }
-        print(json.dumps(out, allow_nan=False))
-        return 0
+        print(json.dumps(_metadata.jsonable(out), allow_nan=False))
+        return
     r, s = res.inertia_ratios, res.ratio_std
     print(f"fit of {len(t)} observations over t in [{t[0]:g}, {t[-1]:g}] in {res.seconds:.1f} s, "
           f"{res.iterations} iterations, loss {res.loss:.3e}, noise sigma {res.noise_sigma:.3e}")
@@ -118,4 +147,3 @@ def run(args):
     lo, hi = res.ratio_range
     print(f"  from m(t) alone (any positive gauge): I2/I1 in [{lo[0]:.4g}, {lo[1]:.4g}], "
           f"I3/I1 in [{hi[0]:.4g}, {hi[1]:.4g}]")
-    return 0

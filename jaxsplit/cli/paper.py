@@ -1,7 +1,14 @@
-"""``jaxsplit paper``: audit the seed paper and write claims.json, report.md and figures."""
+"""``jaxsplit paper``: audit the seed paper and write claims.json, report.md and figures.
 
-import os
+The audit (``paper.run_audit``) computes every file in memory; the CLI claims their names
+up front (``paper.output_names``: ``--force`` checked for each before any work) inside the
+locked ``--out``, then writes them through the one writer (atomic, ``claims.json`` last).
+An interrupted audit leaves ``--out`` as it was.
+"""
+
 import time
+
+from . import _args, _io, _signals
 
 EXAMPLES = """examples:
   jaxsplit paper --out audit                     # all claims: measured ~95 s wall on 2 cores,
@@ -10,6 +17,8 @@ EXAMPLES = """examples:
   jaxsplit paper --out audit --claims thm4.1,rem4.4
 Verdicts (confirmed, refuted, corrected, answered, not-checkable) are computed from the
 measurements; report.md states the rule of each."""
+
+REPORTS = ("claims.json", "report.md")
 
 
 def add_parser(sub):
@@ -21,18 +30,30 @@ def add_parser(sub):
                                    "DIR/claims.json (one record per claim, verdict computed from measurements), "
                                    "DIR/report.md and PNG figures.")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory (created if missing)")
-    p.add_argument("--force", action="store_true", help="overwrite an existing claims.json in DIR")
-    p.add_argument("--claims", default=None, metavar="IDS",
+    p.add_argument("--force", action="store_true", help="overwrite an earlier audit's files in DIR")
+    p.add_argument("--claims", type=_args.names("--claims"), default=None, metavar="IDS",
                    help="comma-separated claim ids to run (default: all)")
     p.set_defaults(func=run)
 
 
 def run(args):
-    from ..paper._audit import audit_paper
+    from ..paper import output_names, run_audit
 
+    names = output_names(args.claims)  # unknown ids refused before any work
     start = time.perf_counter()
-    claims = None if args.claims is None else [c.strip() for c in args.claims.split(",") if c.strip()]
-    records = audit_paper(args.out, claims, force=args.force)
+    with _io.Outputs(force=args.force) as outputs:
+        out = outputs.directory(args.out, "--out directory")
+        for name in names:  # claimed up front: nothing is overwritten without --force
+            outputs.file(out / name, "audit")
+        records, files = run_audit(args.claims)  # abandoned at once on a signal: --out untouched
+        with _signals.current().critical():
+            for name, data in files.items():  # claims.json last: its presence means complete
+                outputs.write_bytes(out / name, data)
+            _print(records, start, out)
+    return 0
+
+
+def _print(records, start, out):
     width = max(len(r["id"]) for r in records)
     for r in records:
         print(f"{r['id']:<{width}}  {r['verdict']}")
@@ -41,5 +62,4 @@ def run(args):
         counts[r["verdict"]] = counts.get(r["verdict"], 0) + 1
     summary = ", ".join(f"{v} {k}" for k, v in sorted(counts.items()))
     print(f"{len(records)} claims ({summary}) in {time.perf_counter() - start:.1f} s -> "
-          f"{os.path.join(args.out, 'claims.json')}, {os.path.join(args.out, 'report.md')}")
-    return 0
+          f"{out / 'claims.json'}, {out / 'report.md'}")

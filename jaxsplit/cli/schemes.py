@@ -3,7 +3,7 @@
 import argparse
 
 from ..core._schemes import schemes
-from . import _common as c
+from . import _metadata
 
 EXAMPLES = """\
 examples:
@@ -26,7 +26,7 @@ def add_parser(sub):
 def run(args):
     table = [schemes[name] for name in schemes]
     if args.json:
-        c.print_json({"schemes": [
+        _metadata.print_json({"schemes": [
             {"name": s.name, "order": s.order, "stages": s.stages, "form": s.form,
              "symmetric": s.symmetric, "citation": s.citation, "coefficients": list(s.coefficients)}
             for s in table]})

@@ -13,13 +13,16 @@ import os
 import sys
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
 from ..core._errors import InputError
 from ..systems._rigid_body import PAPER_BODY, PAPER_M0
-from . import _common as c
+from . import _args, _bounds, _chunked, _io, _metadata, _problem, _progress, _signals
 
+EXIT_OK = 0
+EXIT_NONFINITE = 3
 DEFAULT_DT = 0.01
 DEFAULT_STEPS = 10_000
 RUNS_DIR = "jaxsplit-runs"
@@ -52,12 +55,12 @@ def add_parser(sub):
         description="Integrate the free rigid body with a splitting scheme and report the "
                     "energy and Casimir errors (and the error against the exact solution when "
                     "the body is symmetric).",
-        epilog=EXAMPLES + "\n" + c.EXIT_CODES_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+        epilog=EXAMPLES + "\n" + _args.EXIT_CODES_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     g = p.add_argument_group("problem")
-    g.add_argument("--inertia", type=c.vector3("--inertia", "I1,I2,I3"), default=PAPER_BODY, metavar="I1,I2,I3",
-                   help=f"principal moments of inertia, all > 0 (default {c.fmt_vec(PAPER_BODY)})")
-    g.add_argument("--m0", type=c.vector3("--m0"), default=PAPER_M0, metavar="A,B,C",
-                   help=f"initial body angular momentum (default {c.fmt_vec(PAPER_M0)})")
+    g.add_argument("--inertia", type=_args.vector3("--inertia", "I1,I2,I3"), default=PAPER_BODY, metavar="I1,I2,I3",
+                   help=f"principal moments of inertia, all > 0 (default {_problem.fmt_vec(PAPER_BODY)})")
+    g.add_argument("--m0", type=_args.vector3("--m0"), default=PAPER_M0, metavar="A,B,C",
+                   help=f"initial body angular momentum (default {_problem.fmt_vec(PAPER_M0)})")
     g.add_argument("--allow-nonphysical", action="store_true",
                    help="integrate a body that violates the triangle inequalities I1 + I2 >= I3 (etc.)")
     g = p.add_argument_group("method")
@@ -67,15 +70,15 @@ def add_parser(sub):
                    help="axes: three rotations (the paper); casimir: two, shifted by C/I_k (default axes)")
     g.add_argument("--shift-axis", choices=("auto", "1", "2", "3"), default=None,
                    help="axis k of the Casimir shift, with --split casimir (default auto)")
-    g.add_argument("--dt", type=c.nonzero_float, default=DEFAULT_DT, metavar="H",
+    g.add_argument("--dt", type=_args.nonzero_float, default=DEFAULT_DT, metavar="H",
                    help=f"step size, non-zero; negative runs backwards (default {DEFAULT_DT})")
     n = g.add_mutually_exclusive_group()
-    n.add_argument("--steps", type=c.positive_int, metavar="N",
+    n.add_argument("--steps", type=_args.positive_int, metavar="N",
                    help=f"number of steps (default {DEFAULT_STEPS:,})")
-    n.add_argument("--t-end", type=c.positive_float, metavar="T",
+    n.add_argument("--t-end", type=_args.positive_float, metavar="T",
                    help="duration; steps = round(T / |H|)")
     g = p.add_argument_group("output")
-    g.add_argument("--save-every", type=c.positive_int, default=1, metavar="K",
+    g.add_argument("--save-every", type=_args.positive_int, default=1, metavar="K",
                    help="keep every K-th state (and the last one); the reported errors are maxima over "
                         "the kept states (default 1)")
     g.add_argument("--out", metavar="PATH", help="trajectory file (.npz or .csv)")
@@ -83,9 +86,9 @@ def add_parser(sub):
     g.add_argument("--figure", metavar="PNG", help="figure path (default: --out with suffix .png)")
     g.add_argument("--no-figure", action="store_true", help="do not draw the figure")
     g.add_argument("--no-save", action="store_true", help="write no files; print the summary only")
-    g.add_argument("--max-memory", type=c.byte_size, metavar="SIZE",
+    g.add_argument("--max-memory", type=_args.byte_size, metavar="SIZE",
                    help="refuse runs whose saved states need more (default: half the available memory)")
-    c.add_common_flags(p)
+    _args.add_common_flags(p)
     p.set_defaults(func=run)
 
 
@@ -93,110 +96,140 @@ def add_parser(sub):
 
 
 def _steps(args) -> int:
+    """The step count, bounded (``--steps``, or ``--t-end`` / ``--dt`` without overflow)."""
     if args.t_end is None:
-        return args.steps or DEFAULT_STEPS
-    n = round(args.t_end / abs(args.dt))
-    if n < 1:
-        raise InputError(f"--t-end {args.t_end:g} is shorter than one step of --dt {args.dt:g}")
-    if abs(n * abs(args.dt) - args.t_end) > 1e-9 * args.t_end:
-        print(f"jaxsplit: note: --t-end {args.t_end:g} is not a whole number of steps of --dt {args.dt:g}; "
-              f"integrating {n:,} steps to t = {n * args.dt:g}", file=sys.stderr)
+        n = args.steps or DEFAULT_STEPS
+        return _bounds.at_most(n, _bounds.MAX_STEPS, "--steps", "step indices exact in float64")
+    notes = []
+    n = _bounds.step_count(args.t_end, args.dt, notes=notes)
+    for note in notes:
+        print(f"jaxsplit: note: {note}", file=sys.stderr)
     return n
 
 
-def _output_paths(args, when: str):
-    """(trajectory path, format, figure path or None); all checked before running."""
+def _output_paths(args, outputs, when: str):
+    """(trajectory path, format, figure path or None), claimed before running."""
     if args.no_save:
         if args.out or args.figure:
             raise InputError("--no-save contradicts --out/--figure")
         return None, None, None
     if args.out is None:
         if args.figure:
-            return None, None, c.check_output(args.figure, args.force, "figure")
-        return _default_outputs(args, when)
+            return None, None, outputs.file(args.figure, "figure")
+        return _default_outputs(args, outputs, when)
     out = Path(args.out).expanduser()
-    if args.out.endswith(("/", os.sep)) or out.is_dir():
-        raise InputError(f"--out {args.out!r} is a directory; give a file name such as {str(out / 'run.npz')!r}")
+    if args.out.endswith(("/", os.sep)) or os.path.isdir(_io.resolve(args.out, "--out")):
+        raise InputError(f"--out {args.out!r} is a directory; give a file name such as "
+                         f"{os.path.join(args.out, 'run.npz')!r}")
     suffix = out.suffix.lower().lstrip(".")
     if suffix in FORMATS:
         fmt = suffix
         if args.format and args.format != fmt:
-            raise InputError(f"--format {args.format} conflicts with the suffix of --out {str(out)!r}")
+            raise InputError(f"--format {args.format} conflicts with the suffix of --out {args.out!r}")
     elif suffix == "" or out.name.endswith("."):
         fmt = args.format or "npz"
         out = out.with_name(out.name.rstrip(".") + "." + fmt)
     elif args.format:
         fmt = args.format
     else:
-        raise InputError(f"--out {str(out)!r}: suffix must be .npz or .csv (or give --format npz|csv)")
-    out = c.check_output(out, args.force, "trajectory")
+        raise InputError(f"--out {args.out!r}: suffix must be .npz or .csv (or give --format npz|csv)")
+    out = outputs.file(out, "trajectory")
     figure = None
     if not args.no_figure:
-        figure = Path(args.figure).expanduser() if args.figure else out.with_suffix(".png")
-        if figure == out:
-            raise InputError(f"--figure {str(figure)!r} is the trajectory file itself")
-        figure = c.check_output(figure, args.force, "figure")
+        figure = outputs.file(args.figure or out.with_suffix(".png"), "figure")
     return out, fmt, figure
 
 
-def _default_outputs(args, when: str):
-    """A fresh name in ./jaxsplit-runs/ (created); None when the directory is not writable."""
+def _default_outputs(args, outputs, when: str):
+    """A fresh pair in ./jaxsplit-runs/ (created); none when the directory is not writable."""
     fmt = args.format or "npz"
     base = Path(RUNS_DIR)
     try:
         base.mkdir(exist_ok=True)
         stem = f"simulate-{when}-{args.scheme}"
         for k in range(1, 10_000):
-            name = stem if k == 1 else f"{stem}-{k}"
-            out = base / f"{name}.{fmt}"
+            out = base / f"{stem if k == 1 else f'{stem}-{k}'}.{fmt}"
             figure = None if args.no_figure else out.with_suffix(".png")
-            if not out.exists() and (figure is None or not figure.exists()):
-                break
-        out = c.check_output(out, False, "trajectory")
+            if out.exists() or (figure is not None and figure.exists()):
+                continue
+            try:
+                out = outputs.file(out, "trajectory", force=False)
+                figure = None if figure is None else outputs.file(figure, "figure", force=False)
+                return out, fmt, figure
+            except _io.OutputBusy:  # a run started in the same second holds this name
+                continue
+        raise InputError("no free file name")
     except (OSError, InputError) as err:
         reason = err.strerror if isinstance(err, OSError) else str(err)
         print(f"jaxsplit: note: cannot write to ./{RUNS_DIR} ({reason}); no files written "
               "(give --out PATH)", file=sys.stderr)
         return None, None, None
-    return out, fmt, figure
 
 
 # --------------------------------------------------------------------------- run
 
 
 def run(args):
-    import jax.numpy as jnp
+    with _io.Outputs(force=args.force) as outputs:
+        return _run(args, outputs)
 
-    from ..systems._rigid_body import symmetric_solution
-    from ..systems._splitting import splitting
 
-    # ---- validate everything before any work
-    body = c.check_body(args.inertia, args.allow_nonphysical)
-    m0 = np.asarray(args.m0, dtype=np.float64)
-    with np.errstate(over="ignore"):
-        if not (np.isfinite(0.5 * np.sum(m0 * m0)) and np.isfinite(0.5 * np.sum(m0 * m0 / np.asarray(args.inertia)))):
-            raise InputError(f"--m0 {c.fmt_vec(m0)} is too large: its energy or |m0|^2 overflows float64")
-    scheme, shift = c.resolve_scheme_and_shift(args, body)
+class _Plan(NamedTuple):
+    """Everything decided before the run: validated, bounded and claimed."""
+
+    body: object
+    m0: np.ndarray
+    scheme: object
+    shift: object
+    axis: int | None
+    n_steps: int
+    save_every: int
+    out: Path | None
+    fmt: str | None
+    figure: Path | None
+
+
+def _plan(args, outputs) -> _Plan:
+    body = _problem.body(args.inertia, args.allow_nonphysical)
+    m0 = _problem.initial_state(args.m0, args.inertia)
+    scheme, shift = _problem.scheme_and_shift(args, body)
     n_steps = _steps(args)
-    save_every = args.save_every
-    n_saved = n_steps // save_every + 2
-    limit = args.max_memory or c.default_memory_limit()
-    c.check_memory(n_saved, BYTES_PER_SAVED, limit, steps=n_steps, save_every=save_every)
+    save_every = _bounds.at_most(args.save_every, _bounds.MAX_STEPS, "--save-every", "step indices exact in float64")
+    _bounds.saved_states(n_steps, save_every, BYTES_PER_SAVED, _bounds.memory_limit(args.max_memory))
     when = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
-    out, fmt, figure = _output_paths(args, when)
+    out, fmt, figure = _output_paths(args, outputs, when)
     try:
         axis = body.symmetry_axis()
     except InputError:
         axis = None
+    return _Plan(body, m0, scheme, shift, axis, n_steps, save_every, out, fmt, figure)
 
-    # ---- run
-    kwargs = c.split_options(args.split, shift)
-    step = splitting(body, scheme, args.split, **kwargs)
-    progress = c.Progress(n_steps, enabled=not args.quiet)
-    result = c.run_chunked(step, jnp.asarray(m0), args.dt, n_steps, save_every,
-                           flows_per_step=getattr(step, "flows_per_step", 1), progress=progress)
+
+def _run(args, outputs):
+    import jax.numpy as jnp
+
+    from ..systems._splitting import splitting
+
+    plan = _plan(args, outputs)  # everything checked before any work
+    stop = _signals.current()
+    step = splitting(plan.body, plan.scheme, args.split, **_problem.split_options(args.split, plan.shift))
+    progress = _progress.Progress(plan.n_steps, enabled=not args.quiet)
+    with stop.defer():  # a signal stops the run after the current chunk
+        result = _chunked.run_chunked(step, jnp.asarray(plan.m0), args.dt, plan.n_steps, plan.save_every,
+                                      flows_per_step=getattr(step, "flows_per_step", 1), progress=progress,
+                                      stop=lambda: stop.requested)
+    with stop.critical():  # from here on a signal only changes the exit status: the outputs complete
+        return _report(args, outputs, plan, result)
+
+
+def _report(args, outputs, plan, result):
+    """Diagnostics, files and summary of a finished or stopped run (never lose work)."""
+    import jax.numpy as jnp
+
+    from ..systems._rigid_body import symmetric_solution
+
+    body, m0, scheme, shift, axis, n_steps, save_every, out, fmt, figure = plan
     seconds = result.seconds
-
     # ---- diagnostics
     m = result.x
     t = result.steps * args.dt
@@ -231,7 +264,7 @@ def run(args):
     }
 
     # ---- outputs (also, and especially, for a stopped run: never lose work)
-    meta = c.run_metadata("simulate") | {
+    meta = _metadata.run_metadata("simulate") | {
         k: summary[k] for k in ("scheme", "order", "split", "shift_axis", "inertia", "m0", "dt",
                                 "steps_requested", "save_every", "status", "nonfinite_step")
     } | {"steps_completed": result.completed, "allow_nonphysical": args.allow_nonphysical}
@@ -240,22 +273,22 @@ def run(args):
         arrays = {"t": t, "step": result.steps, "m": m, "energy": energy, "casimir": casimir}
         if exact is not None:
             arrays["m_exact"] = exact
-        _write_trajectory(out, fmt, arrays, meta)
+        _write_trajectory(outputs, out, fmt, arrays, meta)
         written["trajectory"] = str(out)
     if figure is not None:
         from . import _figures as _plots
 
-        title = (f"{scheme.name} ({args.split} split), I = ({c.fmt_vec(args.inertia)}), "
-                 f"m0 = ({c.fmt_vec(m0)}), h = {args.dt:g}, {result.completed:,} steps"
+        title = (f"{scheme.name} ({args.split} split), I = ({_problem.fmt_vec(args.inertia)}), "
+                 f"m0 = ({_problem.fmt_vec(m0)}), h = {args.dt:g}, {result.completed:,} steps"
                  + ("" if status == "ok" else f" [{status}]"))
         fig = _plots.simulate_figure(t, m, energy_error, casimir_error, args.inertia, title=title,
                                      exact_error=exact_error)
-        c.atomic_write(figure, lambda f: _plots.save_figure(fig, f))
+        outputs.write(figure, lambda f: _plots.save_figure(fig, f))
         written["figure"] = str(figure)
     summary["outputs"] = written
 
     if args.json:
-        c.print_json(summary)
+        _metadata.print_json(summary)
     else:
         _print_summary(summary, axis)
     if result.nonfinite_step is not None:
@@ -263,17 +296,18 @@ def run(args):
         print(f"jaxsplit: error: the state became non-finite at step {k:,} (t = {k * args.dt:g}); "
               f"kept the {result.completed:,} steps before it" + (" (written)" if written else ""),
               file=sys.stderr)
-        return c.EXIT_NONFINITE
+        return EXIT_NONFINITE
     if result.interrupted:
-        print(f"jaxsplit: interrupted after {result.completed:,} of {n_steps:,} steps; kept what was computed"
+        print(f"jaxsplit: interrupted ({_signals.current().signal_name}) after {result.completed:,} of {n_steps:,} "
+              "steps; kept what was computed"
               + (" (written)" if written else ""), file=sys.stderr)
-        return c.EXIT_INTERRUPTED
-    return c.EXIT_OK
+        return _signals.EXIT_INTERRUPTED
+    return EXIT_OK
 
 
-def _write_trajectory(path, fmt, arrays, meta):
+def _write_trajectory(outputs, path, fmt, arrays, meta):
     if fmt == "npz":
-        c.save_npz(path, arrays | {"metadata": c.metadata_array(meta)})
+        outputs.write_npz(path, arrays | {"metadata": _metadata.metadata_array(meta)})
         return
     import json
 
@@ -282,18 +316,18 @@ def _write_trajectory(path, fmt, arrays, meta):
     columns += [("energy", arrays["energy"]), ("casimir", arrays["casimir"])]
     if "m_exact" in arrays:
         columns += [(f"m{i + 1}_exact", arrays["m_exact"][:, i]) for i in range(3)]
-    header = "metadata: " + json.dumps(c.jsonable(meta)) + "\n" + ",".join(name for name, _ in columns)
+    header = "metadata: " + json.dumps(_metadata.jsonable(meta)) + "\n" + ",".join(name for name, _ in columns)
     data = np.column_stack([np.asarray(v, dtype=np.float64) for _, v in columns])
     fmts = ["%d"] + ["%.17g"] * (len(columns) - 1)
-    c.atomic_write(path, lambda f: np.savetxt(f, data, delimiter=",", header=header, fmt=fmts, comments="# "))
+    outputs.write(path, lambda f: np.savetxt(f, data, delimiter=",", header=header, fmt=fmts, comments="# "))
 
 
 def _print_summary(s, axis):
-    body = f"I = ({c.fmt_vec(s['inertia'])})" + (f", symmetric about axis {axis + 1}" if axis is not None else "")
+    body = f"I = ({_problem.fmt_vec(s['inertia'])})" + (f", symmetric about axis {axis + 1}" if axis is not None else "")
     split = s["split"] + (f" (shift axis {s['shift_axis']})" if s["split"] == "casimir" else "")
     print(f"jaxsplit simulate: {s['scheme']} (order {s['order']}), {split} split, h = {s['dt']:g}, "
           f"{s['steps']:,} steps to t = {s['t_end']:g}")
-    print(f"  body {body}; m0 = ({c.fmt_vec(s['m0'])})")
+    print(f"  body {body}; m0 = ({_problem.fmt_vec(s['m0'])})")
     every = "" if s["save_every"] == 1 else f", every {s['save_every']:,}th step"
     print(f"  over the {s['saved_states']:,} saved states{every}:")
     print(f"  max relative energy error    {s['energy_error_max']:.3e}   max|H/H0 - 1|")

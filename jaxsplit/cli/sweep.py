@@ -1,20 +1,28 @@
 """``jaxsplit sweep``: one scheme over many cases, in resumable chunks.
 
-The cases (``jaxsplit._sweep.sweep_cases``: a grid of initial states x inertia ratios x step
+The cases (``explore.sweep_cases``: a grid of initial states x inertia ratios x step
 sizes, or random samples) are cut into chunks of ``--chunk-cases``; each chunk is evaluated
-by ``jaxsplit._sweep.sweep`` and written to ``OUT/chunk-NNNNN.npz`` through a temporary file
-and an atomic rename, so a chunk file is either complete or absent. ``OUT/manifest.json``
-records every input; ``--resume`` checks the inputs are the same, skips the chunk files that
-exist and computes the rest. The chunks are cut the same way in every run and each is
-computed by the same code, so a resumed sweep equals an uninterrupted one bit for bit.
-When all chunks exist they are merged into ``OUT/results.npz`` (cases, per-case results,
-metadata) and ``OUT/summary.json``.
+by ``explore.sweep`` and written to ``OUT/chunk-NNNNN.npz`` by the one writer (atomic, in
+the locked output directory), so a chunk file is either complete or absent and two sweeps
+never share a directory. ``OUT/manifest.json`` records every input.
+
+Every chunk file carries its *proof*: the digest of the inputs it was computed under, its
+case range, and a SHA-256 over those, its cases and its results. ``--resume`` reuses a
+chunk only when the proof holds for the current inputs and cases; a chunk of other inputs
+is refused (exit 2: it is another sweep's work), a truncated, edited or unprovable one is
+recomputed. The chunks are cut the same way in every run and each is computed by the same
+code, so a resumed sweep equals an uninterrupted one bit for bit. When all chunks exist
+they are merged into ``OUT/results.npz`` (cases, per-case results, metadata) and
+``OUT/summary.json``.
+
+Every size is bounded before the directory is touched: the number of cases (memory), each
+case's step count (the library's int32 counter) and the reference's step count.
 """
 
 import argparse
+import hashlib
 import json
 import math
-import signal
 import sys
 import time
 from pathlib import Path
@@ -22,13 +30,13 @@ from pathlib import Path
 import numpy as np
 
 from ..core._errors import InputError
-from . import _common as c
+from . import _args, _bounds, _io, _metadata, _progress, _signals
 
 MANIFEST = "manifest.json"
 RESULTS = "results.npz"
 SUMMARY = "summary.json"
 CASES = "cases.npz"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: chunks carry a proof of their inputs, cases and results
 RUNS_DIR = "jaxsplit-runs"
 # Host memory per case while merging: inputs and outputs (~30 numbers), twice.
 BYTES_PER_CASE = 2 * 30 * 8
@@ -51,36 +59,25 @@ the same) or --force (start it over).
 """
 
 
-EXIT_HELP = ("exit status: 0 success; 2 bad input (one line on stderr, nothing run); 130 interrupted "
-             "(Ctrl-C or SIGTERM: finished chunks are kept, --resume continues)")
+EXIT_HELP = ("exit status: 0 success; 2 bad input (one line on stderr, nothing run; also: --out is in use by "
+             "another run, or holds chunks of other inputs); 130 interrupted (SIGINT or SIGTERM: finished chunks "
+             "are kept, --resume continues)")
 
 
 def _ratio_pair(text):
     parts = [p.strip() for p in str(text).split(",")]
     if len(parts) != 2:
         raise argparse.ArgumentTypeError(f"an inertia ratio is a pair I2/I1,I3/I1, got {text!r}")
-    values = tuple(c._number(p, "--ratios") for p in parts)
-    if not all(math.isfinite(v) and v > 0 for v in values):
-        raise argparse.ArgumentTypeError(f"inertia ratios must be positive and finite, got {text!r}")
+    values = tuple(_args.number(p, "--ratios") for p in parts)
+    if not all(math.isfinite(v) and v > 0 and math.isfinite(1 / v) for v in values):
+        raise argparse.ArgumentTypeError(f"inertia ratios must be positive and finite (with finite inverses), "
+                                         f"got {text!r}")
     return values
-
-
-def _positive_list(name):
-    def parse(text):
-        parts = [p.strip() for p in str(text).split(",") if p.strip() != ""]
-        if not parts:
-            raise argparse.ArgumentTypeError(f"needs one or more comma-separated numbers, got {text!r}")
-        values = tuple(c._number(p, name) for p in parts)
-        if not all(math.isfinite(v) and v > 0 for v in values):
-            raise argparse.ArgumentTypeError(f"must be positive finite numbers, got {text!r}")
-        return values
-
-    return parse
 
 
 def _range(name):
     def parse(text):
-        values = _positive_list(name)(text)
+        values = _args.positive_list(name)(text)
         if len(values) != 2 or values[0] > values[1]:
             raise argparse.ArgumentTypeError(f"needs LOW,HIGH with 0 < LOW <= HIGH, got {text!r}")
         return values
@@ -110,22 +107,22 @@ def add_parser(sub):
     g.add_argument("--split", choices=("axes", "casimir"), default="axes", help="(default axes)")
     g.add_argument("--shift-axis", choices=("auto", "1", "2", "3"), default=None,
                    help="axis of the Casimir shift, with --split casimir (default auto)")
-    g.add_argument("--t-end", type=c.positive_float, default=10.0, metavar="T",
+    g.add_argument("--t-end", type=_args.positive_float, default=10.0, metavar="T",
                    help="integration time of every case (default 10)")
     g.add_argument("--reference-scheme", default=ref_scheme, metavar="NAME",
                    help=f"scheme of the reference solution, Casimir split (default {ref_scheme})")
-    g.add_argument("--reference-angle", type=c.positive_float, default=ref_angle, metavar="RAD",
+    g.add_argument("--reference-angle", type=_args.positive_float, default=ref_angle, metavar="RAD",
                    help=f"largest rotation per reference step, <= 0.5 (default {ref_angle:g})")
     g = p.add_argument_group("cases")
     g.add_argument("--sampling", choices=("grid", "random"), default="grid", help="(default grid)")
-    g.add_argument("--states", type=c.positive_int, default=16, metavar="N",
+    g.add_argument("--states", type=_args.positive_int, default=16, metavar="N",
                    help="grid: initial states on the unit sphere (Fibonacci lattice) (default 16)")
     g.add_argument("--ratios", type=_ratio_pair, nargs="+", default=[(1.0, 0.5)], metavar="R2,R3",
                    help="grid: inertia ratio pairs I2/I1,I3/I1 (default 1,0.5)")
-    g.add_argument("--dt", type=_positive_list("--dt"), default=(0.1,), metavar="H[,H...]",
+    g.add_argument("--dt", type=_args.positive_list("--dt"), default=(0.1,), metavar="H[,H...]",
                    help="grid: step sizes (default 0.1)")
-    g.add_argument("--samples", type=c.positive_int, metavar="N", help="random: number of cases")
-    g.add_argument("--seed", type=int, default=0, help="random: seed (default 0)")
+    g.add_argument("--samples", type=_args.positive_int, metavar="N", help="random: number of cases")
+    g.add_argument("--seed", type=_args.seed, default=0, help="random: seed (default 0)")
     g.add_argument("--ratio-range", type=_range("--ratio-range"), default=(0.3, 3.0), metavar="LO,HI",
                    help="random: range of I2/I1 and I3/I1, log-uniform (default 0.3,3)")
     g.add_argument("--dt-range", type=_range("--dt-range"), default=(0.01, 0.5), metavar="LO,HI",
@@ -134,12 +131,12 @@ def add_parser(sub):
                    help="keep bodies violating the triangle inequalities")
     g = p.add_argument_group("output")
     g.add_argument("--out", metavar="DIR", help="output directory (default: new one in ./jaxsplit-runs/)")
-    g.add_argument("--chunk-cases", type=c.positive_int, default=256, metavar="N",
+    g.add_argument("--chunk-cases", type=_args.positive_int, default=256, metavar="N",
                    help="cases per chunk file (default 256)")
     g.add_argument("--resume", action="store_true", help="continue the sweep in --out DIR")
-    g.add_argument("--max-memory", type=c.byte_size, metavar="SIZE",
+    g.add_argument("--max-memory", type=_args.byte_size, metavar="SIZE",
                    help="refuse sweeps whose merged results need more (default: half the available memory)")
-    c.add_common_flags(p)
+    _args.add_common_flags(p)
     p.set_defaults(func=run)
 
 
@@ -148,15 +145,13 @@ def add_parser(sub):
 
 def _inputs(args) -> dict:
     """Every input that determines the results (compared on --resume)."""
-    from ..core._schemes import schemes
-
-    scheme = schemes[args.scheme].name
-    reference = schemes[args.reference_scheme].name
+    s = _bounds.scheme(args.scheme)
+    scheme = s.name
+    reference = _bounds.scheme(args.reference_scheme, "--reference-scheme").name
     if args.reference_angle > 0.5:
         raise InputError(f"--reference-angle must be <= 0.5, got {args.reference_angle:g}")
     if args.shift_axis is not None and args.split != "casimir":
         raise InputError("--shift-axis applies only with --split casimir")
-    s = schemes[scheme]
     if not s.pieces_allowed(3 if args.split == "axes" else 2):
         raise InputError(f"--scheme {scheme} is {s.form} (exactly two pieces) and does not fit "
                          "--split axes (three pieces); use --split casimir")
@@ -179,6 +174,13 @@ def _inputs(args) -> dict:
     return inputs
 
 
+def _case_count(inputs: dict) -> int:
+    """The number of cases, known before any is built."""
+    if inputs["sampling"] == "grid":
+        return inputs["states"] * len(inputs["ratios"]) * len(inputs["dt"])
+    return inputs["samples"]
+
+
 def _cases(inputs: dict) -> dict:
     from ..explore._sweep import physical, sweep_cases
 
@@ -196,134 +198,217 @@ def _cases(inputs: dict) -> dict:
                        physical_only=not inputs["allow_nonphysical"], dtype=np.float64)
 
 
+def _bounded_cases(inputs: dict, limit: int) -> dict:
+    """The cases, after bounding their number (memory), each one's step count (the library
+    counts them in int32) and the reference's step count; nothing is built before the first."""
+    import jax.numpy as jnp
+
+    from ..explore._sweep import MAX_STEPS, reference_steps
+    from ..systems._rigid_body import RigidBody
+
+    n = _case_count(inputs)
+    _bounds.memory(n * BYTES_PER_CASE, limit, f"merging the sweep's {n:,} cases",
+                   f"split it into sweeps of at most {max(1, limit // BYTES_PER_CASE):,} cases "
+                   "(fewer --states/--ratios/--dt or --samples)")
+    cases = _cases(inputs)
+    dt_option = "--dt" if inputs["sampling"] == "grid" else "--dt-range (low end)"
+    _bounds.step_count(inputs["t_end"], float(np.min(cases["h"])), limit=MAX_STEPS, options=("--t-end", dt_option),
+                       why="a sweep counts the steps of each case in int32", at_least_one=False)
+    rates = RigidBody(jnp.asarray(cases["inertia"])).max_rate(jnp.asarray(cases["m0"]))
+    reference_steps(np.asarray(rates), inputs["t_end"], inputs["reference_angle"])  # InputError beyond int32
+    return cases
+
+
 def _chunk_path(out: Path, k: int) -> Path:
     return out / f"chunk-{k:05d}.npz"
 
 
-def _prepare_dir(args, inputs, when) -> tuple[Path, bool]:
-    """The output directory, ready to write; True when resuming an existing manifest."""
+def _sweep_files(out: Path) -> list[Path]:
+    names = [MANIFEST, RESULTS, SUMMARY, CASES]
+    return [p for p in [*(out / name for name in names), *sorted(out.glob("chunk-*.npz"))] if p.exists()]
+
+
+def _prepare_dir(args, outputs, inputs, when) -> tuple[Path, bool]:
+    """The claimed (locked) output directory; True when resuming an existing manifest."""
+    if args.resume and args.force:
+        raise InputError("--resume and --force contradict each other (continue, or start over)")
     if args.out is None:
         if args.resume:
             raise InputError("--resume needs --out DIR (the directory of the sweep to continue)")
-        out = Path(RUNS_DIR) / f"sweep-{when}-{inputs['scheme']}"
-        k = 2
-        while out.exists():
-            out = Path(RUNS_DIR) / f"sweep-{when}-{inputs['scheme']}-{k}"
-            k += 1
+        out = _fresh_directory(outputs, f"sweep-{when}-{inputs['scheme']}")
     else:
-        out = Path(args.out).expanduser()
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {str(out)!r} exists and is not a directory")
-    manifest = out / MANIFEST
-    ours = [manifest, out / RESULTS, out / SUMMARY, out / CASES, *out.glob("chunk-*.npz")] if out.is_dir() else []
-    existing = [p for p in ours if p.exists()]
-    if args.resume and args.force:
-        raise InputError("--resume and --force contradict each other (continue, or start over)")
+        out = outputs.directory(args.out, "--out directory")  # locked: a second sweep into it exits 2 here
+    shown = args.out if args.out is not None else str(out)
+    existing = _sweep_files(out)
     if existing and not (args.resume or args.force):
-        raise InputError(f"--out {str(out)!r} already holds a sweep; pass --resume to continue it or "
+        raise InputError(f"--out {shown!r} already holds a sweep; pass --resume to continue it or "
                          "--force to start it over")
+    outputs.remove_temporaries(out)  # of a killed run (we hold the lock)
+    manifest = out / MANIFEST
     if args.resume and manifest.exists():
-        try:
-            old = json.loads(manifest.read_text())
-            old_inputs = old["inputs"]
-        except (OSError, ValueError, KeyError, TypeError) as err:
-            raise InputError(f"cannot resume: {str(manifest)!r} is not a jaxsplit sweep manifest ({err})") from None
-        new = json.loads(json.dumps(c.jsonable(inputs)))
+        old_inputs = _manifest_inputs(manifest)
+        new = json.loads(json.dumps(_metadata.jsonable(inputs)))
         if old_inputs != new:
             diff = sorted(k for k in set(old_inputs) | set(new) if old_inputs.get(k) != new.get(k))
-            shown = "; ".join(f"{k}: was {old_inputs.get(k)!r}, now {new.get(k)!r}" for k in diff)
-            raise InputError(f"cannot resume {str(out)!r} with different inputs ({shown}); "
+            shown_diff = "; ".join(f"{k}: was {old_inputs.get(k)!r}, now {new.get(k)!r}" for k in diff)
+            raise InputError(f"cannot resume {shown!r} with different inputs ({shown_diff}); "
                              "use the original options, or --force to start over")
         return out, True
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise InputError(f"cannot create --out directory {str(out)!r}: {err.strerror or err}") from None
-    c.check_output(out / MANIFEST, force=True, what="sweep manifest")  # writable?
     if args.force:
-        for p in existing:
-            p.unlink()
+        with _signals.current().critical():
+            for p in existing:
+                p.unlink()
     return out, False
+
+
+def _fresh_directory(outputs, stem: str) -> Path:
+    """A new directory ./jaxsplit-runs/STEM[-k], claimed (a run started in the same second
+    with the same scheme holds another one)."""
+    for k in range(1, 10_000):
+        out = Path(RUNS_DIR) / (stem if k == 1 else f"{stem}-{k}")
+        if out.exists():
+            continue
+        try:
+            return outputs.directory(out, "--out directory")
+        except _io.OutputBusy:
+            continue
+    raise InputError(f"no free directory name ./{RUNS_DIR}/{stem}-k; give --out DIR")
+
+
+def _manifest_inputs(manifest: Path) -> dict:
+    try:
+        old = json.loads(manifest.read_text())
+    except (OSError, ValueError) as err:
+        raise InputError(f"cannot resume: {str(manifest)!r} is not a jaxsplit sweep manifest ({err})") from None
+    if not (isinstance(old, dict) and isinstance(old.get("inputs"), dict)):
+        raise InputError(f"cannot resume: {str(manifest)!r} is not a jaxsplit sweep manifest (a JSON object with "
+                         f"an 'inputs' object; got {type(old).__name__})")
+    return old["inputs"]
+
+
+# --------------------------------------------------------------------------- chunk proofs
+
+
+def _inputs_digest(inputs: dict) -> str:
+    text = json.dumps(_metadata.jsonable(inputs), sort_keys=True)
+    return hashlib.sha256(f"jaxsplit-sweep-{FORMAT_VERSION}:{text}".encode()).hexdigest()
+
+
+def _chunk_digest(inputs_digest: str, lo: int, hi: int, cases: dict, results: dict) -> str:
+    """SHA-256 over the chunk's inputs digest, case range, cases and results."""
+    h = hashlib.sha256(f"{inputs_digest}:{lo}:{hi}".encode())
+    for group, arrays in (("case", cases), ("result", results)):
+        for key in sorted(arrays):
+            a = np.ascontiguousarray(arrays[key])
+            h.update(f"{group}:{key}:{a.dtype.str}:{a.shape}".encode())
+            h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def _case_slice(cases: dict, lo: int, hi: int) -> dict:
+    return {key: np.asarray(v)[lo:hi] for key, v in cases.items()}
+
+
+def _chunk_arrays(inputs_digest: str, lo: int, hi: int, cases: dict, results: dict) -> dict:
+    results = {key: np.asarray(v) for key, v in results.items()}
+    proof = {"format": FORMAT_VERSION, "inputs": inputs_digest, "lo": lo, "hi": hi,
+             "digest": _chunk_digest(inputs_digest, lo, hi, _case_slice(cases, lo, hi), results)}
+    return {"case_index": np.arange(lo, hi), **results, "proof": np.array(json.dumps(proof))}
+
+
+def _proven_chunk(path: Path, lo: int, hi: int, cases: dict, inputs_digest: str) -> dict | None:
+    """The results in ``path`` when its proof holds for these inputs and cases; None when the
+    file is absent, unreadable, truncated, edited or unprovable (it is recomputed). A chunk
+    proven for OTHER inputs is another sweep's finished work: refused."""
+    if not path.exists():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {key: z[key] for key in z.files}
+        proof = json.loads(str(arrays.pop("proof")))
+        index = arrays.pop("case_index")
+        claimed = (proof["format"], proof["inputs"], proof["lo"], proof["hi"], proof["digest"])
+    except Exception:  # noqa: BLE001 - truncated or foreign file (BadZipFile, KeyError, ...): recompute
+        return None
+    if claimed[0] == FORMAT_VERSION and claimed[1] != inputs_digest:
+        raise InputError(f"{str(path)!r} holds a chunk of a sweep with other inputs; resume with the options "
+                         "it was started with, or --force to start over")
+    if claimed[:4] != (FORMAT_VERSION, inputs_digest, lo, hi) or not np.array_equal(index, np.arange(lo, hi)):
+        return None
+    if any(np.ndim(a) == 0 or len(a) != hi - lo for a in arrays.values()):
+        return None
+    if _chunk_digest(inputs_digest, lo, hi, _case_slice(cases, lo, hi), arrays) != claimed[4]:
+        return None
+    return arrays
 
 
 # --------------------------------------------------------------------------- run
 
 
-class _Terminated(KeyboardInterrupt):
-    pass
-
-
 def run(args):
+    with _io.Outputs(force=args.force) as outputs:
+        return _run(args, outputs)
+
+
+def _run(args, outputs):
     from ..explore._sweep import sweep
 
     inputs = _inputs(args)
-    cases = _cases(inputs)
+    cases = _bounded_cases(inputs, _bounds.memory_limit(args.max_memory))
     n = len(cases["h"])
-    limit = args.max_memory or c.default_memory_limit()
-    if n * BYTES_PER_CASE > limit:
-        raise InputError(f"the sweep's {n:,} cases need about {c.format_bytes(n * BYTES_PER_CASE)} of memory to "
-                         f"merge but the limit is {c.format_bytes(limit)} (--max-memory); split it into sweeps of "
-                         f"at most {limit // BYTES_PER_CASE:,} cases (fewer --states/--ratios/--dt or --samples)")
     when = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
-    out, resumed = _prepare_dir(args, inputs, when)
-    for stale in out.glob(".*.tmp"):  # temporary files of a killed run
-        stale.unlink(missing_ok=True)
-    size = args.chunk_cases
+    out, resumed = _prepare_dir(args, outputs, inputs, when)
+    digest = _inputs_digest(inputs)
+    size = inputs["chunk_cases"]
     n_chunks = math.ceil(n / size)
+    bounds = [(k * size, min(n, (k + 1) * size)) for k in range(n_chunks)]
+    done = {k for k, (lo, hi) in enumerate(bounds) if _proven_chunk(_chunk_path(out, k), lo, hi, cases, digest)
+            is not None}
     if not resumed:
-        meta = c.run_metadata("sweep")
-        manifest = {"format": FORMAT_VERSION, "inputs": inputs, "n_cases": n, "n_chunks": n_chunks,
-                    "jaxsplit_version": meta["jaxsplit_version"], "jax_version": meta["jax_version"],
-                    "created_utc": meta["created_utc"]}
-        c.save_npz(out / CASES, cases)
-        c.atomic_write(out / MANIFEST, lambda f: f.write(json.dumps(c.jsonable(manifest), indent=2).encode()))
-
-    todo = [k for k in range(n_chunks) if not _chunk_ok(_chunk_path(out, k))]
+        meta = _metadata.run_metadata("sweep")
+        manifest = {"format": FORMAT_VERSION, "inputs": inputs, "inputs_digest": digest, "n_cases": n,
+                    "n_chunks": n_chunks, "jaxsplit_version": meta["jaxsplit_version"],
+                    "jax_version": meta["jax_version"], "created_utc": meta["created_utc"]}
+        outputs.write_npz(out / CASES, cases)
+        outputs.write_json(out / MANIFEST, manifest)
+    todo = [k for k in range(n_chunks) if k not in done]
     skipped = n_chunks - len(todo)
-    if resumed and not args.quiet and not args.json:
+    if args.resume and not args.quiet and not args.json:
         print(f"resuming {out}: {skipped} of {n_chunks} chunks already done", file=sys.stderr)
-    progress = c.Progress(n, unit="cases", enabled=not args.quiet)
+    progress = _progress.Progress(n, unit="cases", enabled=not args.quiet)
     start = time.perf_counter()
-    done_cases = sum(min(size, n - k * size) for k in range(n_chunks) if k not in set(todo))
-    previous = signal.getsignal(signal.SIGTERM)
-
-    def on_term(signum, frame):
-        raise _Terminated()
-
-    signal.signal(signal.SIGTERM, on_term)
+    done_cases = sum(hi - lo for k, (lo, hi) in enumerate(bounds) if k in done)
+    shift = {"shift": _shift(inputs["shift_axis"])} if inputs["split"] == "casimir" else {}
+    stop = _signals.current()
     computed = 0
-    try:
+    with stop.defer():  # a signal stops the sweep after the current chunk; finished chunks stay written
         for k in todo:
-            lo, hi = k * size, min(n, (k + 1) * size)
-            piece = {key: np.asarray(v)[lo:hi] for key, v in cases.items()}
-            shift = {"shift": _shift(inputs["shift_axis"])} if inputs["split"] == "casimir" else {}
-            res = sweep(inputs["scheme"], piece, t_end=inputs["t_end"], split=inputs["split"], **shift,
-                        reference_scheme=inputs["reference_scheme"],
+            if stop.requested:
+                break
+            lo, hi = bounds[k]
+            res = sweep(inputs["scheme"], _case_slice(cases, lo, hi), t_end=inputs["t_end"], split=inputs["split"],
+                        **shift, reference_scheme=inputs["reference_scheme"],
                         reference_angle=inputs["reference_angle"], chunk_size=max(1, hi - lo))
-            c.save_npz(_chunk_path(out, k), {"case_index": np.arange(lo, hi)} | {
-                key: np.asarray(v) for key, v in res.items()})
+            outputs.write_npz(_chunk_path(out, k), _chunk_arrays(digest, lo, hi, cases, res))
             computed += 1
             done_cases += hi - lo
             progress.update(done_cases)
-    except KeyboardInterrupt:
+    if skipped + computed < n_chunks:  # stopped by a signal: the finished chunks are on disk
         progress.close()
-        left = n_chunks - skipped - computed
-        print(f"jaxsplit: interrupted: {n_chunks - left} of {n_chunks} chunks are saved in {out}; "
-              f"continue with the same options and --out {out} --resume", file=sys.stderr)
-        return c.EXIT_INTERRUPTED
-    finally:
-        signal.signal(signal.SIGTERM, previous)
+        print(f"jaxsplit: interrupted ({stop.signal_name}): {skipped + computed} of {n_chunks} chunks are saved in "
+              f"{out}; continue with the same options and --out {out} --resume", file=sys.stderr)
+        return _signals.EXIT_INTERRUPTED
     progress.close(done_cases)
     seconds = time.perf_counter() - start
-
-    merged = _merge(out, cases, n_chunks, inputs)
-    summary = _summary(merged, inputs, n, n_chunks, computed, skipped, seconds, out)
-    c.atomic_write(out / SUMMARY, lambda f: f.write(json.dumps(c.jsonable(summary), indent=2).encode()))
-    if args.json:
-        c.print_json(summary)
-    else:
-        _print_summary(summary)
-    return c.EXIT_OK
+    with stop.critical():
+        merged = _merge(outputs, out, cases, bounds, inputs, digest)
+        summary = _summary(merged, inputs, n, n_chunks, computed, skipped, seconds, out)
+        outputs.write_json(out / SUMMARY, summary)
+        if args.json:
+            _metadata.print_json(summary)
+        else:
+            _print_summary(summary)
+    return 0
 
 
 def _shift(value):
@@ -331,28 +416,17 @@ def _shift(value):
     return "auto" if value in (None, "auto") else int(value) - 1
 
 
-def _chunk_ok(path: Path) -> bool:
-    if not path.exists():
-        return False
-    try:
-        with np.load(path) as z:
-            return "case_index" in z.files and len(z["case_index"]) > 0
-    except Exception:  # noqa: BLE001 - truncated or foreign file (BadZipFile, OSError, ...): recompute
-        return False
-
-
-def _merge(out: Path, cases: dict, n_chunks: int, inputs: dict) -> dict:
+def _merge(outputs, out: Path, cases: dict, bounds, inputs: dict, digest: str) -> dict:
     parts = []
-    for k in range(n_chunks):
-        with np.load(_chunk_path(out, k)) as z:
-            parts.append({key: z[key] for key in z.files})
-    merged = {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
-    if not np.array_equal(merged["case_index"], np.arange(len(cases["h"]))):
-        raise InputError(f"the chunk files in {str(out)!r} do not cover the cases; rerun with --force")
+    for k, (lo, hi) in enumerate(bounds):
+        part = _proven_chunk(_chunk_path(out, k), lo, hi, cases, digest)
+        if part is None:
+            raise InputError(f"{str(_chunk_path(out, k))!r} changed during the sweep; rerun with --resume")
+        parts.append(part)
     results = {f"case_{k}": np.asarray(v) for k, v in cases.items()}
-    results |= {k: v for k, v in merged.items() if k != "case_index"}
-    meta = c.run_metadata("sweep") | {"inputs": inputs}
-    c.save_npz(out / RESULTS, results | {"metadata": c.metadata_array(meta)})
+    results |= {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
+    meta = _metadata.run_metadata("sweep") | {"inputs": inputs, "inputs_digest": digest}
+    outputs.write_npz(out / RESULTS, results | {"metadata": _metadata.metadata_array(meta)})
     return results
 
 

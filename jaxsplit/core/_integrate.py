@@ -73,9 +73,13 @@ class Solution(eqx.Module):
 Trajectory = Solution  # the former name of the saved-states result
 
 
+MAX_COUNT = 2**53  # counts become the float times k*h: exact up to 2^53 (and beyond any run's reach)
+
+
 def check_count(value, name: str, minimum: int) -> int:
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < minimum:
-        raise InputError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    if (isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer))
+            or not minimum <= value <= MAX_COUNT):
+        raise InputError(f"{name} must be an integer in [{minimum}, 2^53], got {value!r}")
     return int(value)
 
 

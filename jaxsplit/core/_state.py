@@ -38,7 +38,7 @@ def as_state(x0, name: str = "x0"):
         try:
             arr = jnp.asarray(leaf)
         except (TypeError, ValueError) as err:
-            raise InputError(f"{name} must be numeric arrays, got {type(leaf).__name__} {leaf!r}") from err
+            raise InputError(f"{name} must be numeric arrays, got {_describe(leaf)}") from err
         if jnp.issubdtype(arr.dtype, jnp.complexfloating):
             raise InputError(f"{name} must be real, got dtype {arr.dtype}")
         if not (jnp.issubdtype(arr.dtype, jnp.floating) or jnp.issubdtype(arr.dtype, jnp.integer)):
@@ -47,6 +47,14 @@ def as_state(x0, name: str = "x0"):
     if not any(jnp.issubdtype(a.dtype, jnp.floating) for a in arrays):
         arrays = [a.astype(jnp.result_type(float)) for a in arrays]
     return jax.tree_util.tree_unflatten(treedef, arrays)
+
+
+def _describe(leaf) -> str:
+    """A leaf in a few words on one line (an object array's repr spans lines)."""
+    if isinstance(leaf, np.ndarray):
+        return f"{type(leaf).__name__} of dtype {leaf.dtype} and shape {leaf.shape}"
+    text = " ".join(repr(leaf).split())
+    return f"{type(leaf).__name__} {text[:60]}{'...' if len(text) > 60 else ''}"
 
 
 def ravel(state):

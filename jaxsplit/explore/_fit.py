@@ -29,8 +29,24 @@ from ..core._state import as_state, float_dtype, leading_size
 from ..systems._splitting import splitting
 from ._batch import family_of, ravel_rows
 
-
 # ------------------------------------------------------------------ the model
+MAX_SUBSTEPS = 2**31 - 1  # lax.fori_loop counts an interval's model steps in int32
+
+
+def substeps(t, max_step) -> int:
+    """⌈max Δt / max_step⌉ model steps per observation interval: at least 1, at most
+    ``MAX_SUBSTEPS`` (more would wrap the loop counter), checked before anything compiles."""
+    if isinstance(max_step, bool) or not (isinstance(max_step, (int, float, np.floating, np.integer))
+                                          and math.isfinite(max_step) and max_step > 0):
+        raise InputError(f"max_step must be a positive number, got {max_step!r}")
+    longest = float(np.max(np.diff(t)))
+    n = longest / float(max_step)
+    if not n <= MAX_SUBSTEPS:
+        raise InputError(f"max_step {max_step:g} needs {n:.3g} model steps for the longest observation interval "
+                         f"({longest:g}), more than {MAX_SUBSTEPS:,}; use a larger max_step")
+    return max(1, math.ceil(n))
+
+
 def predict(family, params, x0, dts, *, scheme, split=None, options=(), n_sub: int = 1, fixed=None):
     """The states at t0 and after every interval of ``dts`` (leading axis len(dts) + 1)."""
     system = family(params) if fixed is None else family(params, fixed)
@@ -195,8 +211,7 @@ def fit(family, t, observed, params0, *, x0=None, fit_x0: bool = True, fixed=Non
     family = family_of(family)
     scheme = schemes.resolve(scheme)
     t, rows = _observations(t, observed)
-    if not (isinstance(max_step, (int, float)) and math.isfinite(max_step) and max_step > 0):
-        raise InputError(f"max_step must be a positive number, got {max_step!r}")
+    n_sub = substeps(t, max_step)
     if x0 is None:
         if observe is not None:
             raise InputError("give x0= when only part of the state is observed (observe=...)")
@@ -206,8 +221,7 @@ def fit(family, t, observed, params0, *, x0=None, fit_x0: bool = True, fixed=Non
     params0 = jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), params0)
     system = family(params0) if fixed is None else family(params0, fixed)
     split, options = system.resolve_split(split, **split_options)
-    model = Model(family, scheme, split, tuple(sorted(options.items())),
-                  max(1, math.ceil(float(np.max(np.diff(t))) / max_step)), bool(fit_x0), observe)
+    model = Model(family, scheme, split, tuple(sorted(options.items())), n_sub, bool(fit_x0), observe)
     data = {"x0": x0, "dts": jnp.asarray(np.diff(t), dtype), "observed": jnp.asarray(rows, dtype),
             "fixed": None if fixed is None else jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), fixed)}
     theta = {"params": params0, "x0": x0 if fit_x0 else None}
@@ -246,7 +260,7 @@ def simulate(family, params, x0, t, *, fixed=None, observe=None, noise: float = 
     params = jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), params)
     system = family(params) if fixed is None else family(params, fixed)
     split, options = system.resolve_split(split, **split_options)
-    n_sub = max(1, math.ceil(float(np.max(np.diff(t))) / max_step))
+    n_sub = substeps(t, max_step)
     states = jax.jit(predict, static_argnums=(0,), static_argnames=("scheme", "split", "options", "n_sub"))(
         family, params, x0, jnp.asarray(np.diff(t), dtype), scheme=schemes.resolve(scheme), split=split,
         options=tuple(sorted(options.items())), n_sub=n_sub, fixed=fixed)

@@ -48,11 +48,14 @@ import numpy as np
 from ..core._errors import InputError
 from ..core._schemes import schemes
 from ..systems._rigid_body import RigidBody
-from ._fit import adam, lbfgs, predict
+from ._fit import adam, lbfgs, predict, substeps
 
 
 # ------------------------------------------------------------------ data checks
 def _check_observations(t, m):
+    for name, value in (("t", t), ("m", m)):
+        if np.iscomplexobj(value):  # a cast to float would drop the imaginary part silently
+            raise InputError(f"observations {name} must be real, got dtype {np.asarray(value).dtype}")
     try:
         t = np.asarray(t, dtype=float)
         m = np.asarray(m, dtype=float)
@@ -76,14 +79,26 @@ def _a_matrix(m):
     return np.stack([m[..., i, None] * np.cross(m, eye[i]) for i in range(3)], axis=-1)
 
 
+IDENTIFIABLE_TOL = 1e-8  # second singular value of the matching matrix relative to the first
+
+
 def integral_matching(t, m) -> np.ndarray:
     """Least-squares w = 1/I from m_{k+1} − m_k ≈ ½Δt (A(m_k) + A(m_{k+1})) w.
 
-    Minimum-norm solution: the component along (1, 1, 1) is not determined by m(t).
+    Minimum-norm solution: the component along (1, 1, 1) is not determined by m(t) (it is
+    the matrix's exact null vector). The two differences must be: data whose matrix has
+    a second singular value below ``IDENTIFIABLE_TOL`` times the first (m = 0, or m at
+    rest on a principal axis, where every A(m) vanishes) determine no inertia, and are
+    refused rather than fitted.
     """
     t, m = _check_observations(t, m)
-    a = 0.5 * np.diff(t)[:, None, None] * (_a_matrix(m[:-1]) + _a_matrix(m[1:]))
-    w, *_ = np.linalg.lstsq(a.reshape(-1, 3), np.diff(m, axis=0).reshape(-1), rcond=None)
+    a = (0.5 * np.diff(t)[:, None, None] * (_a_matrix(m[:-1]) + _a_matrix(m[1:]))).reshape(-1, 3)
+    sv = np.linalg.svd(a, compute_uv=False)
+    if not sv[1] > IDENTIFIABLE_TOL * sv[0]:
+        raise InputError("the observations do not determine the inertia: m(t) is zero, or rests on a principal "
+                         f"axis, or moves so that only {int(sv[0] > 0)} of the 2 identifiable combinations of the "
+                         f"moments shows (singular values {sv[0]:.2g}, {sv[1]:.2g})")
+    w, *_ = np.linalg.lstsq(a, np.diff(m, axis=0).reshape(-1), rcond=None)
     return w
 
 
@@ -218,8 +233,7 @@ def fit_inertia(t, m, *, energy: float | None = None, energy_sigma: float = 0.0,
         raise InputError(f"inertia1 must be a positive number, got {inertia1!r}")
     if not (math.isfinite(energy_sigma) and energy_sigma >= 0):
         raise InputError(f"energy_sigma must be >= 0, got {energy_sigma!r}")
-    if not (math.isfinite(max_step) and max_step > 0):
-        raise InputError(f"max_step must be positive, got {max_step!r}")
+    n_sub = substeps(t, max_step)
     gauge = (f"energy E = {energy:.9g} (sigma {energy_sigma:.3g})" if energy is not None else
              f"known I1 = {inertia1:.9g}" if inertia1 is not None else
              "ASSUMED I1 = 1 (m(t) does not determine it; pass energy= or inertia1=)")
@@ -233,7 +247,6 @@ def fit_inertia(t, m, *, energy: float | None = None, energy_sigma: float = 0.0,
     shift = int(np.argsort(w_ref, kind="stable")[1])
     dtype = jnp.result_type(float)
     dts = jnp.asarray(np.diff(t), dtype)
-    n_sub = max(1, math.ceil(float(np.max(np.diff(t))) / max_step))
     obs = jnp.asarray(m, dtype)
     log_i1 = jnp.asarray(-np.log(w_ref[0]), dtype)
 
@@ -307,7 +320,7 @@ def simulate_observations(inertia, m0, t, noise: float, *, seed: int = 0, scheme
     t = np.asarray(t, dtype=float)
     inertia = np.asarray(inertia, dtype=float)
     dtype = jnp.result_type(float)
-    n_sub = max(1, math.ceil(float(np.max(np.diff(t))) / max_step))
+    n_sub = substeps(t, max_step)
     shift = int(np.argsort(1 / inertia, kind="stable")[1])
     clean = _predict_jit(schemes.resolve(scheme), shift, n_sub, jnp.log(jnp.asarray(inertia, dtype)),
                          jnp.asarray(m0, dtype), jnp.asarray(np.diff(t), dtype))

@@ -163,6 +163,8 @@ def sweep_cases(*, states=8, ratios=((1.0, 0.5),), step_sizes=(0.1,), sampling: 
         hlo, hhi = _positive_vector(h_range, "h_range")[[0, -1]]
         if not (lo <= hi_ and hlo <= hhi):
             raise InputError(f"ranges must be (low, high): ratio_range={ratio_range}, h_range={h_range}")
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise InputError(f"seed must be an integer >= 0, got {seed!r}")
         rng = np.random.default_rng(seed)
         m0 = rng.standard_normal((n_samples, 3))
         m0 /= np.linalg.norm(m0, axis=1, keepdims=True)

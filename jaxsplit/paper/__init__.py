@@ -4,3 +4,5 @@ registry and runner (``_audit``), verdict rules (``_records``), report.md (``_re
 (``_figures``) and the one function that writes files (``_output.write_outputs``)."""
 
 from ._audit import audit_paper as audit_paper
+from ._audit import output_names as output_names
+from ._audit import run_audit as run_audit

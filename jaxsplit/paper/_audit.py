@@ -19,7 +19,7 @@ import numpy as np
 
 from ..core._errors import InputError
 from . import _section2, _section3, _section4, _section4_remarks
-from ._figures import render
+from ._figures import figure_name, render
 from ._output import MARKER, check_out_dir, write_outputs
 from ._report import report_markdown
 
@@ -50,19 +50,32 @@ def _jsonable(x):
     return x
 
 
-def audit_paper(out_dir, claims=None, *, figures: bool = True, force: bool = False) -> list[dict]:
-    """Run the audit, write ``out_dir/claims.json``, ``out_dir/report.md`` and figures; return the records.
+def output_names(claims=None, *, figures: bool = True) -> tuple[str, ...]:
+    """Every file an audit of ``claims`` writes (known before it runs: the CLI claims them)."""
+    wanted = _wanted(claims)
+    drawn = tuple(figure_name(cid) for cid in wanted if figures and figure_name(cid) is not None)
+    return tuple(dict.fromkeys(drawn)) + ("report.md", MARKER)
 
-    ``claims`` restricts the run to some ids (default: all). Needs float64
-    (``jax.config.update("jax_enable_x64", True)``; the CLI does it).
-    """
-    if not jax.config.jax_enable_x64:
-        raise InputError("the paper audit measures at float64 round-off: enable jax_enable_x64 first")
+
+def _wanted(claims):
     wanted = CLAIM_IDS if claims is None else tuple(claims)
     unknown = [c for c in wanted if c not in CLAIM_IDS]
     if unknown:
         raise InputError(f"unknown claim id(s) {unknown}; known: {', '.join(CLAIM_IDS)}")
-    out_dir = check_out_dir(out_dir, force)
+    if not wanted:
+        raise InputError("no claim ids given: name at least one (or none for all)")
+    return wanted
+
+
+def run_audit(claims=None, *, figures: bool = True) -> tuple[list[dict], dict]:
+    """Run the audit; return (records, {file name: bytes}) with ``claims.json`` last.
+
+    ``claims`` restricts the run to some ids (default: all). Needs float64
+    (``jax.config.update("jax_enable_x64", True)``; the CLI does it). Writes nothing.
+    """
+    if not jax.config.jax_enable_x64:
+        raise InputError("the paper audit measures at float64 round-off: enable jax_enable_x64 first")
+    wanted = _wanted(claims)
     ctx, records, timings, drawn = {}, [], {}, {}
     for ids, claim in CLAIMS:
         if not any(cid in wanted for cid in ids):
@@ -82,5 +95,18 @@ def audit_paper(out_dir, claims=None, *, figures: bool = True, force: bool = Fal
     captions = {cid: (name, caption) for cid, (name, caption, _) in rendered.items()}
     files["report.md"] = report_markdown(records, captions, timings, SECTION_OF).encode("utf-8")
     files[MARKER] = json.dumps(records, indent=2, ensure_ascii=False).encode("utf-8")
+    return records, files
+
+
+def audit_paper(out_dir, claims=None, *, figures: bool = True, force: bool = False) -> list[dict]:
+    """Run the audit, write ``out_dir/claims.json``, ``out_dir/report.md`` and figures; return the records.
+
+    ``claims`` restricts the run to some ids (default: all). The directory is checked before
+    any work; every file is written atomically, ``claims.json`` last (its presence means a
+    complete audit). ``jaxsplit paper`` writes the same files through the CLI's one writer
+    (resolved paths, a lock on the directory).
+    """
+    out_dir = check_out_dir(out_dir, force)
+    records, files = run_audit(claims, figures=figures)
     write_outputs(out_dir, files)
     return records

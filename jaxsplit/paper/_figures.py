@@ -169,6 +169,11 @@ _PLOTS = {
 }
 
 
+def figure_name(cid: str) -> str | None:
+    """The file name of a claim's figure (``None`` when it draws none)."""
+    return _PLOTS[cid][1] if cid in _PLOTS else None
+
+
 def render(figures: dict) -> dict:
     """{claim id: data} -> {claim id: (file name, caption, PNG bytes)}."""
     out = {}

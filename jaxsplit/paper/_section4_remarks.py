@@ -252,7 +252,7 @@ def claim_rem42(ctx):
 
 
 # --------------------------------------------------------------------------- Remark 4.4
-_OTHER_AXES = jnp.array([[1, 2], [0, 2], [0, 1]])
+_OTHER_AXES = np.array([[1, 2], [0, 2], [0, 1]])
 
 
 def tangent_block(step, axis, h):
@@ -260,7 +260,7 @@ def tangent_block(step, axis, h):
     restricted to the sphere's tangent plane there: a 2×2 block of determinant 1."""
     e = jnp.eye(3)[axis]
     jac = jax.jacfwd(lambda m: step(m, h))(e)
-    others = jnp.eye(3)[_OTHER_AXES[axis]]
+    others = jnp.eye(3)[jnp.asarray(_OTHER_AXES)[axis]]
     return others @ jac @ others.T
 
 

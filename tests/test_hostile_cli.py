@@ -1,0 +1,351 @@
+"""The command line against a hostile user (issue 10), in-process through ``main``.
+
+Grouped by the classes of the issue; each case asserts the exact contract:
+
+* bad input, unbounded work, misleading messages: exit 2, ONE line on stderr naming the
+  value (and what is allowed), nothing on stdout, no traceback, nothing written;
+* work lost or overwritten: outputs are one file however they are spelled, never
+  replaced without --force, never shared by two runs (a held lock means exit 2), and a
+  resumed sweep reuses only chunks that prove their inputs;
+* silent wrong results: degenerate data are refused, extreme but valid inputs give the
+  right answer.
+
+Signals and real concurrent processes are in ``test_signals.py``.
+"""
+
+import json
+import os
+
+import numpy as np
+import pytest
+
+from jaxsplit.cli import main
+from jaxsplit.cli._io import Outputs
+
+LONG_NAME = "r" * 300 + ".npz"
+
+
+def _assert_refused(rc, captured, words):
+    assert rc == 2, captured
+    err = captured.err
+    assert captured.out == "" and "Traceback" not in err
+    assert err.startswith("jaxsplit: error: ") and err.count("\n") == 1, f"not one line: {err!r}"
+    for word in words:
+        assert word in err, f"{word!r} missing from {err!r}"
+
+
+def _refused(argv, words, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    rc = main(argv)
+    _assert_refused(rc, capsys.readouterr(), words)
+    assert sorted(p.name for p in tmp_path.iterdir()) == before  # nothing written, nothing left behind
+
+
+# ---------------------------------------------------------------- 3, 4: bad input, bounds, messages
+SIMULATE = [
+    (["--dt", "1e-300", "--t-end", "1"], ["--t-end 1", "--dt 1e-300", "1e+300 steps", "more than"]),
+    (["--t-end", "1e300", "--dt", "1e-300"], ["inf steps", "larger --dt"]),
+    (["--t-end", "1e308"], ["--t-end 1e+308", "steps", "more than"]),
+    (["--t-end", "1e-5"], ["--t-end 1e-05", "shorter than one step"]),
+    (["--steps", "1e30"], ["--steps is 1,000,000,000,000,000,019,884,624,838,656", "more than"]),
+    (["--steps", "1e400"], ["--steps", "positive integer", "'1e400'"]),
+    (["--steps", "-1e3"], ["--steps", "positive integer"]),
+    (["--steps", "0x10"], ["--steps", "positive integer", "'0x10'"]),
+    (["--steps", ""], ["--steps", "positive integer"]),
+    (["--save-every", "1e30", "--steps", "10"], ["--save-every", "more than"]),
+    (["--inertia", "1e-320,1,1"], ["--inertia", "1/I1 overflows", "at least"]),
+    (["--inertia", "1,1e-310,1", "--allow-nonphysical"], ["--inertia", "1/I2 overflows"]),
+    (["--m0", "1e150,0,0", "--inertia", "1e-160,1,1", "--allow-nonphysical"], ["--m0", "--inertia", "energy"]),
+    (["--m0", "1e200,0,0"], ["--m0", "|m0|^2 overflows"]),
+    (["--m0", "-inf,0,0.8"], ["--m0", "finite", "'-inf,0,0.8'"]),
+    (["--m0", "-nan,0,0.8"], ["--m0", "finite"]),
+    (["--m0", "2,,1"], ["--m0", "'2,,1'", "value 2 is empty"]),
+    (["--m0", ",,"], ["--m0", "value 1 is empty"]),
+    (["--m0", "1,2,3,"], ["--m0", "got 4 values"]),
+    (["--inertia", "1;2;3"], ["--inertia", "got 1 value"]),
+    (["--dt", "-inf"], ["--dt", "finite non-zero", "'-inf'"]),
+    (["--dt", "1e400"], ["--dt", "finite non-zero"]),
+    (["--t-end", "-1"], ["--t-end", "positive"]),
+    (["--t-end", "nan"], ["--t-end", "positive"]),
+    (["--max-memory", "0.1"], ["--max-memory", "at least 1 byte", "'0.1'"]),
+    (["--max-memory", "0"], ["--max-memory", "at least 1 byte"]),
+    (["--max-memory", "1e400"], ["--max-memory", "at least 1 byte"]),
+    (["--max-memory", "-5G"], ["--max-memory", "500M or 2G"]),
+    (["--max-memory", "1", "--steps", "10"], ["--max-memory", "save fewer states"]),
+    (["--scheme", "triple-jump-1000000"], ["triple-jump-1000000", "stages", "triple-jump-14 is the largest"]),
+    (["--scheme", "triple-jump-16"], ["triple-jump-16 has 3^7 stages", "1,000"]),
+    (["--scheme", "triple-jump-" + "9" * 5000], ["3^((N-2)/2) stages"]),
+    (["--scheme", "triple-jump-7"], ["triple-jump order must be an even integer"]),
+    (["--scheme", ""], ["unknown scheme ''"]),
+    (["--split", "casimir", "--shift-axis", "4"], ["--shift-axis", "invalid choice", "'4'"]),
+    (["--format", "json"], ["--format", "invalid choice"]),
+    (["--out", LONG_NAME], ["--out", "304 bytes long", "allows 255"]),
+    (["--steps", "5", "--out", "a.npz", "--figure", LONG_NAME.replace("npz", "png")], ["figure", "304 bytes long"]),
+    (["--out", "x.npz", "--figure", "x.npz"], ["figure 'x.npz' is the same file as the trajectory"]),
+    (["--out", "x.npz", "--figure", "./x.npz"], ["same file as the trajectory"]),
+    (["--out", "x.csv", "--figure", f"{'sub'}/../x.csv"], ["same file as the trajectory"]),
+    (["--out", "new-dir/"], ["--out 'new-dir/' is a directory"]),
+    (["--figure", "no-such-dir/f.png"], ["no-such-dir", "does not exist"]),
+]
+
+SWEEP = [
+    (["--sampling", "random", "--samples", "3", "--seed", "-1"], ["--seed", "'-1'", "integer >= 0"]),
+    (["--sampling", "random", "--samples", "3", "--seed", str(2**64)], ["--seed", "below 2^64"]),
+    (["--sampling", "random", "--samples", "3", "--seed", "1.5"], ["--seed", "'1.5'"]),
+    (["--states", "1e12"], ["1,000,000,000,000 cases", "--max-memory", "at most"]),
+    (["--sampling", "random", "--samples", "1e12"], ["1,000,000,000,000 cases", "--max-memory"]),
+    (["--states", "100", "--max-memory", "1K"], ["100 cases", "1.0 KiB", "--max-memory"]),
+    (["--t-end", "1e300"], ["--t-end 1e+300", "--dt 0.1", "more than the 2,147,483,647", "int32"]),
+    (["--dt", "1e-12", "--t-end", "10"], ["--dt 1e-12", "1e+13 steps", "int32"]),
+    (["--sampling", "random", "--samples", "2", "--dt-range", "1e-12,1e-11"], ["--dt-range (low end)", "int32"]),
+    (["--t-end", "1e9", "--dt", "1", "--states", "1"], ["reference would need", "steps"]),
+    (["--ratios", "1e-320,1"], ["--ratios", "finite inverses"]),
+    (["--ratios", "1,1,1"], ["--ratios", "pair"]),
+    (["--ratios", "-1,1"], ["--ratios", "positive", "'-1,1'"]),
+    (["--reference-scheme", "triple-jump-100"], ["--reference-scheme triple-jump-100", "stages"]),
+    (["--reference-scheme", "nope"], ["unknown scheme 'nope'"]),
+    (["--scheme", "triple-jump-22"], ["--scheme triple-jump-22", "3^10 stages"]),
+    (["--chunk-cases", "0"], ["--chunk-cases", "positive integer"]),
+    (["--reference-angle", "0"], ["--reference-angle", "positive"]),
+    (["--samples", "3"], ["--samples applies only with --sampling random"]),
+    (["--max-memory", "1"], ["--max-memory", "cases"]),
+    (["--resume", "--force", "--out", "d"], ["--resume and --force contradict"]),
+    (["--out", "a-file"], ["--out directory 'a-file' exists and is not a directory"]),
+    (["--out", "d" * 300], ["--out directory", "300 bytes long"]),
+]
+
+CHECK = [
+    (["--start", "1e9"], ["--start is 1,000,000,000", "8,192", "16 x --start"]),
+    (["--start", "8193"], ["--start is 8,193"]),
+    (["--states", "1e12"], ["--states is 1,000,000,000,000", "100,000"]),
+    (["--t-end", "1e-300"], ["turns by only", "--t-end 1e-300", "0.1 rad"]),
+    (["--t-end", "0.001"], ["turns by only 0.00024 rad"]),
+    (["--m0", "1e-300,1e-300,0"], ["no order can be measured", "0.1 rad"]),
+    (["--m0", "0,0,1"], ["--m0 is an equilibrium"]),
+    (["--inertia", "1,1,1", "--m0", "0.6,0,0.8"], ["--m0 is an equilibrium"]),
+    (["--seed", "-1"], ["--seed", "'-1'"]),
+    (["--scheme", "triple-jump-20"], ["triple-jump-20", "stages"]),
+    (["--inertia", "1e-320,1,1"], ["1/I1 overflows"]),
+    (["--dt", "-inf"], ["--dt", "finite non-zero"]),
+    (["--m0", "1e200,1e200,0"], ["--m0", "overflows"]),
+    (["--shift-axis", "2"], ["--shift-axis applies only with --split casimir"]),
+]
+
+PAPER = [
+    (["--out", "a", "--claims", ","], ["--claims", "names no claims", "','"]),
+    (["--out", "a", "--claims", " , "], ["--claims", "names no claims"]),
+    (["--out", "a", "--claims", "nope"], ["unknown claim id(s) ['nope']"]),
+    (["--out", "a-file"], ["--out directory 'a-file' exists and is not a directory"]),
+    (["--out", "p" * 300], ["--out directory", "300 bytes long"]),
+    (["--out", "old", "--claims", "stages"], ["audit file", "claims.json", "exists", "--force"]),
+    (["--out", "old-report", "--claims", "stages"], ["report.md", "exists", "--force"]),
+    (["--out", "old-figure", "--claims", "order2"], ["order2_ladder.png", "exists", "--force"]),
+]
+
+
+def _setup(tmp_path):
+    (tmp_path / "a-file").write_text("x")
+    (tmp_path / "sub").mkdir()
+    for name, file in (("old", "claims.json"), ("old-report", "report.md"), ("old-figure", "order2_ladder.png")):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / file).write_text("precious")
+
+
+@pytest.mark.parametrize("command,argv,words", [("simulate", a, w) for a, w in SIMULATE]
+                         + [("sweep", a, w) for a, w in SWEEP] + [("check", a, w) for a, w in CHECK]
+                         + [("paper", a, w) for a, w in PAPER],
+                         ids=[f"{c}: {' '.join(a)[:60]}" for c, table in
+                              (("simulate", SIMULATE), ("sweep", SWEEP), ("check", CHECK), ("paper", PAPER))
+                              for a, _ in table])
+def test_refused_with_one_line_naming_the_value(command, argv, words, capsys, tmp_path, monkeypatch):
+    _setup(tmp_path)
+    _refused([command, *argv], words, capsys, tmp_path, monkeypatch)
+    for name in ("old", "old-report", "old-figure"):  # an earlier audit is untouched
+        assert [p.read_text() for p in (tmp_path / name).iterdir()] == ["precious"]
+
+
+# ---------------------------------------------------------------- fit: malformed and degenerate data
+def _obs(t, m, **extra):
+    return {"t": np.asarray(t), "m": np.asarray(m), **extra}
+
+
+_T = np.linspace(0.0, 1.0, 10)
+_MOVING = np.stack([np.cos(_T), np.sin(_T), 0.5 + 0 * _T], axis=1)
+FIT_FILES = {
+    "npy": (lambda p: np.save(p, _MOVING), ["single array (.npy)", ".npz"]),
+    "complex": (lambda p: np.savez(p, **_obs(_T, _MOVING * (1 + 1j))), ["m must be real", "complex"]),
+    "zero": (lambda p: np.savez(p, **_obs(_T, 0 * _MOVING)), ["do not determine the inertia", "zero"]),
+    "on-axis": (lambda p: np.savez(p, **_obs(_T, np.tile([0.0, 0.0, 2.0], (10, 1)))), ["principal axis"]),
+    "decreasing": (lambda p: np.savez(p, **_obs(_T[::-1], _MOVING)), ["strictly increasing"]),
+    "three": (lambda p: np.savez(p, **_obs(_T[:3], _MOVING[:3])), ["n >= 4"]),
+    "inf": (lambda p: np.savez(p, **_obs(_T, np.where(_MOVING > 0.9, np.inf, _MOVING))), ["m must be finite"]),
+    "object": (lambda p: np.savez(p, t=_T, m=np.array([object()] * 30).reshape(10, 3)), ["not a readable .npz"]),
+    "energy-pair": (lambda p: np.savez(p, **_obs(_T, _MOVING, energy=np.ones(2))), ["'energy'", "one number"]),
+    "truncated": (lambda p: (np.savez(p, **_obs(_T, _MOVING)), p.write_bytes(p.read_bytes()[:100])),
+                  ["not a readable .npz"]),
+    "directory": (lambda p: p.mkdir(), ["not a readable .npz"]),
+}
+FIT_OPTIONS = [
+    (["--energy", "-1"], ["--energy", "positive"]),
+    (["--energy", "nan"], ["--energy", "positive"]),
+    (["--energy-sigma", "-1"], ["--energy-sigma", ">= 0"]),
+    (["--inertia1", "0"], ["--inertia1", "positive"]),
+    (["--max-step", "0"], ["--max-step", "positive"]),
+    (["--max-step", "1e-300"], ["max_step 1e-300", "more than 2,147,483,647"]),
+    (["--max-step", "1e-6"], ["model's steps per evaluation", "1,000,000", "--max-step"]),
+    (["--scheme", "triple-jump-1000000"], ["triple-jump-1000000", "stages"]),
+    (["--scheme", "nope"], ["unknown scheme 'nope'"]),
+    (["--energy", "1", "--inertia1", "2"], ["one gauge"]),
+]
+
+
+@pytest.mark.parametrize("name", list(FIT_FILES))
+def test_fit_refuses_malformed_and_degenerate_data(name, capsys, tmp_path, monkeypatch):
+    path = tmp_path / (f"{name}.npy" if name == "npy" else f"{name}.npz")
+    make, words = FIT_FILES[name]
+    make(path)
+    _refused(["fit", "--data", str(path)], words, capsys, tmp_path, monkeypatch)
+
+
+@pytest.mark.parametrize("argv,words", FIT_OPTIONS, ids=[" ".join(a) for a, _ in FIT_OPTIONS])
+def test_fit_refuses_bad_options(argv, words, capsys, tmp_path, monkeypatch):
+    np.savez(tmp_path / "obs.npz", **_obs(_T, _MOVING))
+    _refused(["fit", "--data", "obs.npz", *argv], words, capsys, tmp_path, monkeypatch)
+
+
+# ---------------------------------------------------------------- 1: work lost or overwritten
+def test_a_symlink_or_hard_link_to_an_output_is_that_output(capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "target.npz").write_bytes(b"precious")
+    os.symlink("target.npz", tmp_path / "link.npz")
+    rc = main(["simulate", "--steps", "5", "--out", "link.npz", "--no-figure"])
+    _assert_refused(rc, capsys.readouterr(), ["'link.npz' exists", "--force"])
+    os.link(tmp_path / "target.npz", tmp_path / "hard.png")
+    rc = main(["simulate", "--steps", "5", "--out", "target.npz", "--figure", "hard.png", "--force"])
+    _assert_refused(rc, capsys.readouterr(), ["figure 'hard.png' is the same file as the trajectory"])
+    rc = main(["simulate", "--steps", "5", "--out", "link.npz", "--no-figure", "--force", "--quiet"])
+    assert rc == 0 and capsys.readouterr().err == ""
+    assert (tmp_path / "link.npz").is_symlink() and np.load(tmp_path / "target.npz")["m"].shape == (6, 3)
+
+
+@pytest.mark.parametrize("special", ["device", "fifo"])
+def test_a_special_file_is_never_replaced_even_with_force(special, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    if special == "fifo":
+        os.mkfifo(tmp_path / "run.npz")
+    else:
+        os.symlink("/dev/null", tmp_path / "run.npz")  # resolved: the device itself
+    rc = main(["simulate", "--steps", "5", "--out", "run.npz", "--no-figure", "--force"])
+    _assert_refused(rc, capsys.readouterr(), ["'run.npz' exists and is not a regular file", "never replaced"])
+    assert os.path.exists("/dev/null") and not os.path.isfile("/dev/null")
+
+
+@pytest.mark.parametrize("command", ["simulate", "sweep", "paper"])
+def test_an_output_held_by_another_run_exits_2(command, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    argv = {"simulate": ["simulate", "--steps", "5", "--out", "run.npz", "--no-figure"],
+            "sweep": ["sweep", "--states", "2", "--out", "shared"],
+            "paper": ["paper", "--out", "shared", "--claims", "stages"]}[command]
+    with Outputs() as other:  # another jaxsplit run holding the output
+        other.directory(tmp_path / "shared", "--out directory")
+        other.file(tmp_path / "run.npz", "trajectory")
+        rc = main(argv)
+        _assert_refused(rc, capsys.readouterr(), ["in use by another jaxsplit run", f"(pid {os.getpid()})"])
+    assert not (tmp_path / "run.npz").exists() and list((tmp_path / "shared").glob("*")) == []
+
+
+# ---------------------------------------------------------------- 1: resume trusts only proven chunks
+SMALL_SWEEP = ["sweep", "--scheme", "strang", "--reference-scheme", "strang", "--states", "8", "--chunk-cases", "4",
+               "--t-end", "1", "--quiet", "--json"]
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory):
+    out = tmp_path_factory.mktemp("sweep") / "done"
+    assert main(SMALL_SWEEP + ["--out", str(out)]) == 0
+    with np.load(out / "results.npz") as z:
+        results = {k: z[k] for k in z.files if k != "metadata"}
+    return out, results
+
+
+def _copy(src, dst, skip=()):
+    dst.mkdir()
+    for p in src.iterdir():
+        if p.name not in skip:
+            (dst / p.name).write_bytes(p.read_bytes())
+    return dst
+
+
+def _resume(out, capsys, argv=SMALL_SWEEP):
+    capsys.readouterr()
+    rc = main(argv + ["--out", str(out), "--resume"])
+    captured = capsys.readouterr()
+    return rc, captured
+
+
+def _edit_chunk(path, edit):
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files}
+    edit(arrays)
+    np.savez(path, **arrays)
+
+
+@pytest.mark.parametrize("edit,recomputed", [
+    (lambda a: a.update(energy_error=a["energy_error"][:2]), 1),  # a short array: would merge misaligned
+    (lambda a: a.update(error=a["error"] * 1.5), 1),  # edited numbers
+    (lambda a: a.pop("proof"), 1),  # an old-format chunk: cannot prove its inputs
+    (lambda a: a.update(case_index=a["case_index"] + 4), 1),  # another chunk's range
+], ids=["short-array", "edited-values", "no-proof", "wrong-range"])
+def test_resume_recomputes_a_chunk_that_cannot_prove_itself(edit, recomputed, finished, tmp_path, capsys):
+    out = _copy(finished[0], tmp_path / "copy", skip=("results.npz", "summary.json"))
+    _edit_chunk(out / "chunk-00001.npz", edit)
+    rc, captured = _resume(out, capsys)
+    assert rc == 0, captured.err
+    assert json.loads(captured.out)["chunks_computed"] == recomputed
+    with np.load(out / "results.npz") as z:
+        for key, value in finished[1].items():
+            np.testing.assert_array_equal(z[key], value)
+
+
+def test_resume_without_manifest_reuses_proven_chunks(finished, tmp_path, capsys):
+    out = _copy(finished[0], tmp_path / "copy", skip=("manifest.json", "results.npz", "summary.json"))
+    rc, captured = _resume(out, capsys)
+    assert rc == 0 and json.loads(captured.out)["chunks_computed"] == 0
+
+
+def test_resume_without_manifest_refuses_chunks_of_other_inputs(finished, tmp_path, capsys):
+    out = _copy(finished[0], tmp_path / "copy", skip=("manifest.json",))
+    other = [a if a != "strang" else "lie-trotter" for a in SMALL_SWEEP[:3]] + SMALL_SWEEP[3:]
+    rc, captured = _resume(out, capsys, other)
+    _assert_refused(rc, captured, ["chunk-00000.npz", "holds a chunk of a sweep with other inputs", "--force"])
+    assert sorted(p.name for p in out.glob("chunk-*")) == ["chunk-00000.npz", "chunk-00001.npz"]
+
+
+@pytest.mark.parametrize("manifest", ["[]", '"x"', '{"inputs": 5}', '{"inputs": [1]}', "{", "null"])
+def test_resume_refuses_a_manifest_of_the_wrong_type(manifest, finished, tmp_path, capsys):
+    out = _copy(finished[0], tmp_path / "copy")
+    (out / "manifest.json").write_text(manifest)
+    rc, captured = _resume(out, capsys)
+    _assert_refused(rc, captured, ["cannot resume", "not a jaxsplit sweep manifest"])
+
+
+# ---------------------------------------------------------------- 2: extreme but valid inputs, right answers
+def test_a_subnormal_step_moves_nothing(capsys):
+    assert main(["simulate", "--dt", "1e-320", "--steps", "5", "--no-save", "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["steps"] == 5 and s["exact_error_max"] == 0.0 and s["energy_error_max"] == 0.0
+
+
+def test_a_save_interval_beyond_the_run_keeps_the_first_and_last_states(capsys, tmp_path):
+    out = tmp_path / "r.npz"
+    assert main(["simulate", "--steps", "3", "--save-every", "1e6", "--out", str(out), "--no-figure"]) == 0
+    with np.load(out) as z:
+        assert list(z["step"]) == [0, 3]
+
+
+def test_a_sweep_shorter_than_its_step_runs_one_exact_step(capsys, tmp_path):
+    argv = [a if a != "1" else "0.05" for a in SMALL_SWEEP]  # --t-end 0.05 with the default --dt 0.1
+    assert main(argv + ["--out", str(tmp_path / "s")]) == 0
+    with np.load(tmp_path / "s" / "results.npz") as z:
+        assert np.all(z["n_steps"] == 1) and np.all(z["h"] == 0.05)
