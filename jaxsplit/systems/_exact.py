@@ -50,7 +50,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..core._errors import InputError
-from ._elliptic import carlson_rf, carlson_rj, incomplete_pi, jacobi_reduced, safe_sqrt
+from ._elliptic import incomplete_pi, jacobi_reduced, legendre_integrals, safe_sqrt
 from ._rigid_body import RigidBody, as_float_array, is_concrete
 from ._spin import exp_hat
 from .so3 import check_shape
@@ -66,10 +66,13 @@ class Orbit(NamedTuple):
     amplitudes: jax.Array  # (σ_1 A_1, A_2, σ_3 A_3)
     k2: jax.Array
     kp2: jax.Array
+    big_k: jax.Array  # K(k)
     rate: jax.Array  # λ
     tau0: jax.Array
     pi0: jax.Array  # Π(−ν; am τ_0)
     nu: jax.Array
+    complete_pi: jax.Array  # Π(−ν | k)
+    start: jax.Array  # m_0 in the normal form (a placeholder when steady)
     precession: jax.Array  # (G w, G (v_3 − v_1)): φ = G w t − G (v_3 − v_1) ΔΠ / λ
     steady: jax.Array  # bool: an equilibrium
     omega: jax.Array  # W m_0 (the steady rotation's angular velocity)
@@ -80,7 +83,7 @@ def _proper_sort(w):
     """(F, sorted w): F has rows e_order with one sign flipped for an odd permutation."""
     order = jnp.argsort(w)
     perm = jnp.eye(3, dtype=w.dtype)[order]
-    parity = jnp.linalg.det(perm)  # ±1
+    parity = jnp.sign((order[1] - order[0]) * (order[2] - order[0]) * (order[2] - order[1])).astype(w.dtype)
     return perm * jnp.stack([jnp.ones_like(parity), parity, jnp.ones_like(parity)])[:, None], w[order]
 
 
@@ -109,15 +112,13 @@ def orbit(inertia, m0) -> Orbit:
     kp2 = jnp.maximum((v[2] - v[0]) * d2 / ((v[2] - v[1]) * d1), 0.0)
     s1 = jnp.where(m[0] >= 0, 1.0, -1.0).astype(m0.dtype)
     s3 = jnp.where(m[2] >= 0, 1.0, -1.0).astype(m0.dtype)
-    s0 = jnp.clip(m[1] / a2, -1.0, 1.0)
-    c2, d2_ = (m[0] / a1) ** 2, (m[2] / a3) ** 2
-    rf0 = carlson_rf(c2, d2_, 1.0)
+    s0, c0, d0 = jnp.clip(m[1] / a2, -1.0, 1.0), jnp.abs(m[0]) / a1, jnp.abs(m[2]) / a3
     nu = (v[1] - v[0]) / (v[2] - v[1])
-    pi0 = s0 * rf0 - nu / 3 * s0**3 * carlson_rj(c2, d2_, 1.0, 1 + nu * s0 * s0)
     g = safe_sqrt(jnp.sum(m0 * m0))
     w_circled = jnp.where(minor, u[2], u[0])
+    tau0, pi0, big_k, complete = legendre_integrals(-nu, s0, c0, d0, kp2)
     return Orbit(frame, jnp.where(minor, 1.0, -1.0).astype(m0.dtype), jnp.stack([s1 * a1, a2, s3 * a3]),
-                 k2, kp2, -s1 * s3 * jnp.sqrt(d1 * (v[2] - v[1])), s0 * rf0, pi0, nu,
+                 k2, kp2, big_k, -s1 * s3 * jnp.sqrt(d1 * (v[2] - v[1])), tau0, pi0, nu, complete, m,
                  jnp.stack([g * w_circled, g * (v[2] - v[0])]), steady, w * m0, m0)
 
 
@@ -139,7 +140,7 @@ def _rotation_z(phi):
 def _momentum_at(o: Orbit, t):
     """m(t) in the normal form's coordinates, and what the attitude needs of τ."""
     tau = o.tau0 + o.rate * o.direction * t
-    sn, cn, dn, turns = jacobi_reduced(tau, o.k2, o.kp2)
+    sn, cn, dn, turns = jacobi_reduced(tau, o.k2, o.kp2, o.big_k)
     sign = 1 - 2 * jnp.mod(turns, 2)
     m = o.amplitudes * jnp.stack([sign * cn, sign * sn, dn], axis=-1)
     return m, (sn, cn, dn, turns)
@@ -154,10 +155,9 @@ def momentum_at(o: Orbit, t):
 def attitude_at(o: Orbit, q0, t):
     """(m(t), Q(t)) for times ``t`` (any shape) from the attitude ``q0`` (3, 3) at t = 0."""
     m, (sn, cn, dn, turns) = _momentum_at(o, t)
-    m_start, _ = _momentum_at(o, jnp.zeros((), t.dtype))
-    pi = incomplete_pi(-o.nu, sn, cn, dn, turns, o.k2, o.kp2)
+    pi = incomplete_pi(-o.nu, sn, cn, dn, turns, o.complete_pi)
     phi = o.precession[0] * t - o.precession[1] * (pi - o.pi0) / o.rate
-    c = q0 @ o.frame.T @ jnp.swapaxes(_frame_about_e3(m_start), -1, -2)
+    c = q0 @ o.frame.T @ jnp.swapaxes(_frame_about_e3(o.start), -1, -2)
     q = c @ _rotation_z(phi) @ _frame_about_e3(m) @ o.frame
     steady_q = q0 @ exp_hat(t[..., None] * o.omega)
     steady = o.steady
@@ -195,9 +195,21 @@ def exact_solution(body, x0, t):
         raise InputError(f"exact_solution takes one state, m0 of shape (3,), got {tuple(m0.shape)} (jax.vmap over "
                          "states)")
     t = jnp.asarray(t, dtype=m0.dtype)
-    if is_concrete(t) and not bool(jnp.all(jnp.isfinite(t))):
+    if is_concrete(t) and not np.all(np.isfinite(np.asarray(t))):
         raise InputError("t must be finite times")
-    o = orbit(jnp.asarray(inertia, m0.dtype), m0)
+    inertia = jnp.asarray(inertia, m0.dtype)
     if attitude:
-        return attitude_at(o, q0.astype(m0.dtype), t)
-    return momentum_at(o, t)
+        return _attitude_solution(inertia, m0, q0.astype(m0.dtype), t)
+    return _momentum_solution(inertia, m0, t)
+
+
+# The jit boundary (as ``integrate``): compiled once per shape and dtype, so eager calls are
+# cheap; inside a caller's jit / vmap / grad it is simply inlined.
+@jax.jit
+def _momentum_solution(inertia, m0, t):
+    return momentum_at(orbit(inertia, m0), t)
+
+
+@jax.jit
+def _attitude_solution(inertia, m0, q0, t):
+    return attitude_at(orbit(inertia, m0), q0, t)

@@ -11,6 +11,9 @@ Q ← Q exp(ct hat(m)), a quaternion q ← q ⊗ (cos(c|m|t/2), sin(c|m|t/2) m/|
 ½|m|² is the Casimir and the flow is the identity; on the larger structures (attitude, heavy
 top) it is not, but it still commutes with every function of m, which is what lets the
 attitude and the symmetric top keep a two-piece split (see ``_attitude``, ``_heavy_top``).
+
+``Commuting(flows)`` is the exact flow of a sum of Poisson-commuting pieces (the flows applied
+in turn): one piece of a split made of several exactly solvable commuting parts.
 """
 
 import equinox as eqx
@@ -79,3 +82,19 @@ class MomentumSpin(AbstractFlow):
             else:  # m itself (exactly fixed) and "fixed" parts
                 out.append(leaf)
         return type(state)(*out) if hasattr(state, "_fields") else tuple(out)
+
+
+class Commuting(AbstractFlow):
+    """The exact flow of a sum of Poisson-commuting pieces: their flows applied one after the
+    other (any order). A one-parameter group when every piece is one."""
+
+    flows: tuple
+
+    def __call__(self, state, t):
+        for flow in self.flows:
+            state = flow(state, t)
+        return state
+
+    @property
+    def is_group(self) -> bool:
+        return all(f.is_group for f in self.flows)
