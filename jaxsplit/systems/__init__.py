@@ -2,17 +2,33 @@
 solvable pieces, built from the so(3) toolkit (``so3``).
 
 Modules: ``_base`` (``AbstractSystem``, the protocol a user's own system implements),
-``_rigid_body`` (the free body), ``_hamilton_poisson`` (a system from two functions: the
-paper's §2–3 examples), ``_splitting`` (``splitting``: system + scheme -> step), ``so3``
-(rotations, quaternions, rotation flows that turn declared parts of a state).
+``_rigid_body`` (the free body), ``_attitude`` (the free body with its attitude (m, Q) or
+(m, q)), ``_potential`` (a body about a fixed point in a potential of Γ, state (m, Γ); the
+potential kick) with ``_heavy_top`` and ``_gravity_gradient``, ``_exact`` (the free body's
+exact solution for any inertia, on the JAX elliptic functions of ``_elliptic``), ``_spin``
+(rotations by a vanishing angle vector, the spin about m, commuting pieces),
+``_hamilton_poisson`` (a system from two functions: the paper's §2–3 examples),
+``_splitting`` (``splitting``: system + scheme -> step), ``so3`` (rotations, quaternions,
+rotation flows that turn declared parts of a state).
 """
 
 from . import so3 as so3
+from ._attitude import Attitude as Attitude
+from ._attitude import attitude as attitude
 from ._base import AbstractSystem as AbstractSystem
+from ._exact import exact_solution as exact_solution
+from ._gravity_gradient import GravityGradient as GravityGradient
+from ._gravity_gradient import gravity_gradient as gravity_gradient
 from ._hamilton_poisson import HamiltonPoisson as HamiltonPoisson
+from ._heavy_top import HeavyTop as HeavyTop
+from ._heavy_top import heavy_top as heavy_top
+from ._potential import BodyInPotential as BodyInPotential
+from ._potential import PotentialKick as PotentialKick
 from ._rigid_body import STANDARD_CASE as STANDARD_CASE
 from ._rigid_body import RigidBody as RigidBody
 from ._rigid_body import symmetric_solution as symmetric_solution
+from ._spin import Commuting as Commuting
+from ._spin import MomentumSpin as MomentumSpin
 from ._splitting import splitting as splitting
 
 
