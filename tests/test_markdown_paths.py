@@ -1,0 +1,95 @@
+"""Every file the Markdown documentation points to is in the repository (issue 13).
+
+Checked in README.md, benchmarks/README.md, benchmarks/results/*.md and docs/*.md:
+* Markdown links ``[text](target)`` that are not web addresses or anchors;
+* code spans that name a repository path: a span whose first component is a directory of
+  the repository (seen from the document or from the root), or a bare ``*.py``/``*.md``/
+  ``*.ipynb`` file name, must match a file (glob patterns allowed);
+* nothing may point outside the repository (``../``, ``shared/``).
+Names of files the tools write (``DIR/claims.json``, ``jaxsplit-runs/…``) start with no
+repository directory and are not checked.
+"""
+
+import re
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCUMENTS = sorted([ROOT / "README.md", *(ROOT / "benchmarks").glob("README.md"),
+                    *(ROOT / "benchmarks" / "results").glob("*.md"), *(ROOT / "docs").glob("*.md")])
+LINK = re.compile(r"\[[^\]]*\]\(([^)\s]+)\)")
+CODE_SPAN = re.compile(r"`([^`\s]+)`")
+SOURCE_SUFFIXES = (".py", ".md", ".ipynb")
+OUTSIDE = ("../", "shared/", "/work/", "/tmp/")
+
+
+def _site_pages() -> set[str]:
+    """Pages the documentation site generates at build time (listed in mkdocs.yml's nav)."""
+    return set(re.findall(r"([\w/.-]+\.(?:md|ipynb))", (ROOT / "mkdocs.yml").read_text()))
+
+
+def _expand(path: str) -> list[str]:
+    """``a.{md,json}`` -> ``a.md``, ``a.json``."""
+    brace = re.search(r"\{([^{}]*)\}", path)
+    if not brace:
+        return [path]
+    return [q for alt in brace.group(1).split(",")
+            for q in _expand(path[:brace.start()] + alt + path[brace.end():])]
+
+
+def _exists(path: str, base: Path) -> bool:
+    path = path.split("#")[0].split("::")[0].rstrip("/")
+    if "{" in path:
+        return all(_exists(p, base) for p in _expand(path))
+    if base == ROOT / "docs" and path in _site_pages():
+        return True
+    for root in (base, ROOT):
+        if any(ch in path for ch in "*?["):
+            if list(root.glob(path)):
+                return True
+        elif (root / path).exists():
+            return True
+    return False
+
+
+def _names_repo_path(span: str, base: Path) -> bool:
+    span = span.rstrip(".,;:")
+    if "/" in span:
+        first = span.split("/")[0]
+        return bool(first) and any((root / first).is_dir() for root in (base, ROOT))
+    return span.endswith(SOURCE_SUFFIXES) and re.fullmatch(r"[\w.-]+", span) is not None
+
+
+def _missing(document: Path) -> list[str]:
+    text = document.read_text()
+    base = document.parent
+    bad = []
+    for target in LINK.findall(text):
+        if target.startswith(("http://", "https://", "mailto:", "#")):
+            continue
+        if target.startswith(OUTSIDE) or not _exists(target, base):
+            bad.append(f"link {target}")
+    for span in CODE_SPAN.findall(text):
+        if span.startswith(OUTSIDE) or "/shared/" in span:
+            bad.append(f"outside the repository: {span}")
+        elif _names_repo_path(span, base):
+            name = span.rstrip(".,;:")
+            if "/" in name and not _exists(name, base):
+                bad.append(f"path {name}")
+            elif "/" not in name and not list(ROOT.rglob(name)):
+                bad.append(f"file {name}")
+    return bad
+
+
+@pytest.mark.parametrize("document", DOCUMENTS, ids=[str(d.relative_to(ROOT)) for d in DOCUMENTS])
+def test_every_path_in_the_documentation_is_in_the_repository(document):
+    assert _missing(document) == []
+
+
+def test_the_checker_catches_a_missing_file(tmp_path):
+    page = tmp_path / "page.md"
+    page.write_text("see [the table](results/nowhere.md), `shared/reference/coefficients.md`, "
+                    "`tests/no_such_test.py` and `no_such_module.py`; `DIR/claims.json` is an output")
+    (tmp_path / "results").mkdir()
+    assert len(_missing(page)) == 4
