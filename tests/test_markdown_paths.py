@@ -2,7 +2,7 @@
 
 Checked in README.md, benchmarks/README.md, benchmarks/results/*.md and docs/*.md:
 * Markdown links ``[text](target)`` that are not web addresses or anchors;
-* code spans that name a repository path: a span whose first component is a directory of
+* code spans and plain-text paths that name a repository path: a span whose first component is a directory of
   the repository (seen from the document or from the root), or a bare ``*.py``/``*.md``/
   ``*.ipynb`` file name, must match a file (glob patterns allowed);
 * nothing may point outside the repository (``../``, ``shared/``).
@@ -20,6 +20,7 @@ DOCUMENTS = sorted([ROOT / "README.md", *(ROOT / "benchmarks").glob("README.md")
                     *(ROOT / "benchmarks" / "results").glob("*.md"), *(ROOT / "docs").glob("*.md")])
 LINK = re.compile(r"\[[^\]]*\]\(([^)\s]+)\)")
 CODE_SPAN = re.compile(r"`([^`\s]+)`")
+PLAIN_PATH = re.compile(r"(?<![\w/.:-])([\w.-]+/[\w./{},*-]*[\w*}])")  # a/b anywhere in the prose
 SOURCE_SUFFIXES = (".py", ".md", ".ipynb")
 OUTSIDE = ("../", "shared/", "/work/", "/tmp/")
 
@@ -54,7 +55,7 @@ def _exists(path: str, base: Path) -> bool:
 
 
 def _names_repo_path(span: str, base: Path) -> bool:
-    span = span.rstrip(".,;:")
+    span = span.rstrip(".,;:").removeprefix("./")
     if "/" in span:
         first = span.split("/")[0]
         return bool(first) and any((root / first).is_dir() for root in (base, ROOT))
@@ -70,11 +71,14 @@ def _missing(document: Path) -> list[str]:
             continue
         if target.startswith(OUTSIDE) or not _exists(target, base):
             bad.append(f"link {target}")
-    for span in CODE_SPAN.findall(text):
+    spans = CODE_SPAN.findall(text)
+    prose = PLAIN_PATH.findall(CODE_SPAN.sub(" ", LINK.sub(" ", text)))
+    spans += [p for p in prose if "." in p.rsplit("/", 1)[-1] and p not in spans]  # a/b.ext, not "NumPy/JAX"
+    for span in spans:
         if span.startswith(OUTSIDE) or "/shared/" in span:
             bad.append(f"outside the repository: {span}")
         elif _names_repo_path(span, base):
-            name = span.rstrip(".,;:")
+            name = span.rstrip(".,;:").removeprefix("./")
             if "/" in name and not _exists(name, base):
                 bad.append(f"path {name}")
             elif "/" not in name and not list(ROOT.rglob(name)):
@@ -90,6 +94,7 @@ def test_every_path_in_the_documentation_is_in_the_repository(document):
 def test_the_checker_catches_a_missing_file(tmp_path):
     page = tmp_path / "page.md"
     page.write_text("see [the table](results/nowhere.md), `shared/reference/coefficients.md`, "
-                    "`tests/no_such_test.py` and `no_such_module.py`; `DIR/claims.json` is an output")
+                    "`tests/no_such_test.py`, `no_such_module.py` and (results/gone.md); `DIR/claims.json` is an "
+                    "output, https://example.org/results/x.md a web page")
     (tmp_path / "results").mkdir()
-    assert len(_missing(page)) == 4
+    assert len(_missing(page)) == 5, _missing(page)
