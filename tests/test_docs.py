@@ -12,6 +12,8 @@ import time
 import pytest
 from conftest import ROOT, docs_hooks
 
+pytestmark = pytest.mark.xdist_group("notebooks")  # one worker executes the notebooks once, for both files
+
 import jaxsplit
 
 

@@ -7,6 +7,8 @@ import pytest
 
 NOTEBOOKS = sorted((pathlib.Path(__file__).parent.parent / "notebooks").glob("*.ipynb"))
 
+pytestmark = pytest.mark.xdist_group("notebooks")  # one worker executes the notebooks once, for both files
+
 
 def test_there_are_three_stories():
     assert len(NOTEBOOKS) >= 3
