@@ -105,6 +105,11 @@ def audit_paper(out_dir, claims=None, *, figures: bool = True, force: bool = Fal
     any work; every file is written atomically, ``claims.json`` last (its presence means a
     complete audit). ``jaxsplit paper`` writes the same files through the CLI's one writer
     (resolved paths, a lock on the directory).
+
+    >>> import tempfile, jaxsplit
+    >>> out = tempfile.mkdtemp()
+    >>> [(r["id"], r["verdict"]) for r in jaxsplit.audit_paper(out, ["stages"], figures=False)]
+    [('stages', 'corrected')]
     """
     out_dir = check_out_dir(out_dir, force)
     records, files = run_audit(claims, figures=figures)

@@ -38,6 +38,18 @@ class HamiltonPoisson(AbstractSystem):
     ``invariants`` maps names to functions x -> scalar that the flow conserves (H is
     always monitored as ``"energy"``). It offers no split: its steps are Runge–Kutta
     methods (``jaxsplit.runge_kutta``) or flows the user composes.
+
+    >>> import jax.numpy as jnp, jaxsplit
+    >>> inertia = jnp.array([2.0, 1.0, 2 / 3])
+    >>> body = jaxsplit.HamiltonPoisson(jaxsplit.hat, lambda m: 0.5 * jnp.sum(m**2 / inertia),
+    ...                                 {"casimir": lambda m: m @ m})
+    >>> m = jnp.array([0.4, -0.3, 0.8])
+    >>> body.vector_field(m)                      # Π(m) ∇H(m) = m × I⁻¹m
+    Array([-0.12, -0.32, -0.06], dtype=float64)
+    >>> sorted(body.invariants())
+    ['casimir', 'energy']
+    >>> bool(jaxsplit.poisson_defect(jaxsplit.rk4(body), body, m, 0.1) > 1e-9)   # RK4 is not Poisson
+    True
     """
 
     poisson_fn: Callable
@@ -81,7 +93,14 @@ def _half_square(x):
 
 
 def rigid_body_system(inertia) -> HamiltonPoisson:
-    """The free rigid body on so(3)* (``inertia`` or a ``RigidBody``), Casimir C = ½|m|²."""
+    """The free rigid body on so(3)* (``inertia`` or a ``RigidBody``), Casimir C = ½|m|².
+
+    >>> import jax.numpy as jnp, jaxsplit
+    >>> system = jaxsplit.rigid_body_system(jnp.array([2.0, 1.0, 2 / 3]))
+    >>> system.vector_field(jnp.array([0.4, -0.3, 0.8]))
+    Array([-0.12, -0.32, -0.06], dtype=float64)
+    >>> float(jaxsplit.poisson_defect(jaxsplit.explicit_euler(system), system, jnp.array([0.4, -0.3, 0.8]), 0.1))
+    0.00156..."""
     body = inertia if isinstance(inertia, RigidBody) else RigidBody(inertia)
     return HamiltonPoisson(hat, Partial(_rb_energy, body.inertia), (("casimir", _half_square),),
                            "rigid-body")
@@ -102,7 +121,12 @@ def _canonical_pi(dim, x):
 
 
 def canonical_system(hamiltonian: Callable, dim: int, name: str = "canonical") -> HamiltonPoisson:
-    """(R^{2m}, J, H) with x = (q, p): q̇ = ∂H/∂p, ṗ = −∂H/∂q."""
+    """(R^{2m}, J, H) with x = (q, p): q̇ = ∂H/∂p, ṗ = −∂H/∂q.
+
+    >>> import jax.numpy as jnp, jaxsplit
+    >>> pendulum = jaxsplit.canonical_system(lambda x: 0.5 * x[1] ** 2 - jnp.cos(x[0]), 2)
+    >>> pendulum.vector_field(jnp.array([0.5, 1.0]))          # (q̇, ṗ) = (p, −sin q)
+    Array([ 1.        , -0.47942554], dtype=float64)"""
     canonical_matrix(dim)  # validates dim
     return HamiltonPoisson(Partial(_canonical_pi, dim), hamiltonian, (), name)
 
@@ -112,7 +136,12 @@ def _constant_pi(matrix, x):
 
 
 def constant_poisson_system(matrix, hamiltonian: Callable, name: str = "constant-poisson") -> HamiltonPoisson:
-    """(Rⁿ, Π, H) with a constant skew matrix Π (any constant skew matrix is Poisson)."""
+    """(Rⁿ, Π, H) with a constant skew matrix Π (any constant skew matrix is Poisson).
+
+    >>> import jax.numpy as jnp, jaxsplit
+    >>> system = jaxsplit.constant_poisson_system(jnp.array([[0.0, 1.0], [-1.0, 0.0]]), lambda x: 0.5 * x @ x)
+    >>> system.vector_field(jnp.array([1.0, 0.0]))
+    Array([ 0., -1.], dtype=float64)"""
     mat = np.asarray(matrix, dtype=float)
     if mat.ndim != 2 or mat.shape[0] != mat.shape[1] or not np.allclose(mat, -mat.T, rtol=0, atol=1e-14):
         raise InputError(f"a constant Poisson matrix must be square and skew, got {mat.tolist()}")
@@ -124,7 +153,15 @@ def _oscillator_energy(x):
 
 
 def harmonic_oscillator() -> HamiltonPoisson:
-    """Example 2.1: x = (q, p), H = ½(q² + p²), ω = dp ∧ dq, q̇ = p, ṗ = −q."""
+    """Example 2.1: x = (q, p), H = ½(q² + p²), ω = dp ∧ dq, q̇ = p, ṗ = −q.
+
+    >>> import jax.numpy as jnp, jaxsplit
+    >>> oscillator = jaxsplit.harmonic_oscillator()
+    >>> x = jaxsplit.integrate(jaxsplit.gauss_legendre(oscillator, 2), jnp.array([1.0, 0.0]), 0.1, 10).final
+    >>> x                                          # ≈ (cos 1, −sin 1)
+    Array([ 0.54030242, -0.84147091], dtype=float64)
+    >>> float(abs(oscillator.hamiltonian(x) - 0.5)) < 1e-15
+    True"""
     return canonical_system(_oscillator_energy, 2, "harmonic-oscillator")
 
 
@@ -140,7 +177,11 @@ def _ex31_energy(coefficients, x):
 
 
 def example_3_1(a=1.0, b=1.0, c=0.0) -> HamiltonPoisson:
-    """Example 3.1: Π(x) = [[0, x₂], [−x₂, 0]], H = A x₁ + B x₂ + C, ẋ = (B x₂, −A x₂)."""
+    """Example 3.1: Π(x) = [[0, x₂], [−x₂, 0]], H = A x₁ + B x₂ + C, ẋ = (B x₂, −A x₂).
+
+    >>> import jax.numpy as jnp, jaxsplit
+    >>> jaxsplit.example_3_1(1.0, 2.0).vector_field(jnp.array([0.5, 1.0]))
+    Array([ 2., -1.], dtype=float64)"""
     coefficients = jnp.stack([jnp.asarray(a), jnp.asarray(b), jnp.asarray(c)]).astype(jnp.result_type(float))
     if not isinstance(coefficients, jax.core.Tracer) and not bool(jnp.all(jnp.isfinite(coefficients))):
         raise InputError(f"A, B, C must be finite, got {(a, b, c)}")
