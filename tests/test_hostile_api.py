@@ -135,9 +135,8 @@ def test_a_batched_concrete_body_with_one_state_is_refused():
     _refused(lambda: integrate(splitting(body, "strang", split="axes"), M0, 0.1, 3).final, "inertia")
 
 
-@pytest.mark.xfail(strict=True, raises=pytest.fail.Exception, reason="systems/_rigid_body: the inertia's shape is only "
-                   "validated for concrete values; under jit a (2,) inertia integrates silently")
 def test_a_wrongly_shaped_body_inside_jit_is_refused():
+    """Shapes are static: checked under jit too (values only when concrete)."""
     def run(inertia):
         return integrate(splitting(RigidBody(inertia), "strang", split="axes"), M0, 0.1, 3).final
 

@@ -51,11 +51,12 @@ def as_float_array(x, name: str):
 
 
 def check_inertia(inertia, name: str = "inertia"):
-    """Principal moments (..., 3) > 0, finite (checked when concrete)."""
+    """Principal moments (..., 3): the shape always (it is static, also under ``jit``), the
+    values > 0 and finite when concrete."""
     inertia = as_float_array(inertia, name)
+    if inertia.ndim < 1 or inertia.shape[-1] != 3:
+        raise InputError(f"{name} must have 3 components (I1, I2, I3), got shape {tuple(inertia.shape)}")
     if is_concrete(inertia):
-        if inertia.ndim < 1 or inertia.shape[-1] != 3:
-            raise InputError(f"{name} must have 3 components (I1, I2, I3), got shape {tuple(inertia.shape)}")
         values = np.asarray(inertia)
         if not np.all(np.isfinite(values)):
             raise InputError(f"{name} must be finite, got {values.tolist()}")
