@@ -31,14 +31,16 @@ AREAS = {  # package -> (title, one line on what it owns)
 
 
 def public_names() -> dict[str, list[str]]:
-    """{area: [public names]} from the ``from .area._module import X as X`` lines of ``jaxsplit/__init__.py``."""
+    """{area: [public names]} from the ``PUBLIC`` table of ``jaxsplit/__init__.py`` (read as
+    data: the site builds without importing JAX)."""
     tree = ast.parse((ROOT / "jaxsplit" / "__init__.py").read_text())
+    table = next(ast.literal_eval(node.value) for node in tree.body
+                 if isinstance(node, ast.Assign) and getattr(node.targets[0], "id", None) == "PUBLIC")
     areas: dict[str, list[str]] = {area: [] for area in AREAS}
-    for node in tree.body:
-        if isinstance(node, ast.ImportFrom) and node.level == 1 and node.module:
-            area = node.module.split(".")[0]
-            if area in areas:
-                areas[area] += [alias.asname or alias.name for alias in node.names]
+    for module, names in table.items():
+        area = module.split(".")[0]
+        if area in areas:
+            areas[area] += list(names)
     return areas
 
 

@@ -246,16 +246,48 @@ def test_policy_keeps_an_ignored_sigint_ignored(monkeypatch):
         signal.signal(signal.SIGINT, previous)
 
 
-def test_importing_the_package_starts_no_jax_backend():
-    """Import-time arrays start XLA's thread pools: a forked CLI child (the harness) then
-    deadlocks, and every `import jaxsplit` pays the backend start. Module constants are NumPy."""
+def test_importing_the_command_line_loads_no_jax():
+    """The console script imports ``jaxsplit.cli`` before ``main`` installs the signal policy:
+    that import must be light (no JAX, no NumPy), so no interrupt can land in a heavy import
+    outside the policy. Importing the library itself starts no JAX backend (import-time
+    arrays start XLA's threads; a forked CLI child then deadlocks)."""
     import subprocess
     import sys
 
-    code = ("import importlib, jaxsplit, jaxsplit.cli\n"
+    code = ("import importlib, sys, jaxsplit.cli\n"
+            "print(sorted(m for m in ('jax', 'numpy') if m in sys.modules))\n"
+            "import jaxsplit\n"
+            "jaxsplit.integrate  # loads every public name\n"
             "for n in ('simulate', 'sweep', 'check', 'fit', 'paper', 'schemes'):\n"
             "    importlib.import_module('jaxsplit.cli.' + n)\n"
             "from jax._src import xla_bridge\n"
             "print(sorted(xla_bridge._backends))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "[]", out.stdout
+    assert out.stdout.split() == ["[]", "[]"], out.stdout
+
+
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
+def test_signal_while_jax_is_imported_exits_130_without_traceback(tmp_path, sig):
+    """Ctrl-C during the first second of a run (JAX importing): the policy already holds."""
+    import subprocess
+    import sys
+
+    code = ("import builtins, os, signal, sys\n"
+            "real_import = builtins.__import__\n"
+            "def importing(name, *args, **kwargs):\n"
+            "    if name == 'jax' and 'jax' not in sys.modules:\n"
+            f"        os.kill(os.getpid(), signal.{sig})\n"
+            "    return real_import(name, *args, **kwargs)\n"
+            "builtins.__import__ = importing\n"
+            "from jaxsplit.cli import main  # what the console script does\n"
+            "sys.argv = ['jaxsplit', 'simulate', '--steps', '10', '--out', 'run.npz']\n"
+            "sys.exit(main())")
+    import os
+    from pathlib import Path
+
+    env = dict(os.environ, PYTHONPATH=f"{Path(__file__).resolve().parents[1]}{os.pathsep}"
+                                       f"{os.environ.get('PYTHONPATH', '')}")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, env=env,
+                         check=False, timeout=120)
+    _interrupted(run, sig)
+    assert list(tmp_path.iterdir()) == []

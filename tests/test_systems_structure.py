@@ -215,6 +215,6 @@ def test_refused_and_conditional_splits():
         jaxsplit.splitting(jaxsplit.attitude(INERTIA), "strang", "spin", shift=5)
     assert jaxsplit.attitude(INERTIA).resolve_split("spin") == ("spin", {"shift": 1})
     with pytest.raises(InputError, match=r"the attitude part must have shape \(\.\.\., 3, 3\)"):
-        jaxsplit.integrate(jaxsplit.splitting(jaxsplit.attitude(INERTIA), "strang"), (M, QUAT), 0.1, 2).final
+        jaxsplit.integrate(jaxsplit.splitting(jaxsplit.attitude(INERTIA), "strang"), (M, QUAT), 0.1, 2)
     with pytest.raises(InputError, match=r"tuple \(m, Γ\)"):
         jaxsplit.heavy_top(INERTIA, CHI).hamiltonian(M)

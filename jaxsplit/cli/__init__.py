@@ -3,9 +3,8 @@
 Each subcommand module exposes ``add_parser(subparsers)`` (which sets ``func``). Bad input
 raises ``InputError`` anywhere below; ``main`` turns it into one line on stderr and exit
 status 2, never a traceback. SIGINT and SIGTERM follow the one policy of ``_signals``,
-installed first thing in ``main``: exit status 130, with finished work written. (Before
-``main`` runs, Python is still importing ``jaxsplit`` and JAX for the console script; an
-interrupt there gets Python's default behaviour, with nothing written yet.) The CLI runs
+installed first thing in ``main``, before JAX is imported (importing this package loads
+neither JAX nor NumPy): exit status 130, with finished work written. The CLI runs
 in float64.
 
 Shared pieces, one concept each: ``_args`` (argument types), ``_bounds`` (every size a
@@ -19,7 +18,7 @@ import argparse
 import importlib
 import sys
 
-from ..core._errors import InputError
+from .._errors import InputError
 from . import _args, _signals
 
 COMMANDS = ("simulate", "schemes", "check", "sweep", "fit", "paper")

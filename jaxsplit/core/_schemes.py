@@ -49,7 +49,7 @@ class Scheme:
     >>> jaxsplit.Scheme("bad", 2, "symmetric", (0.5,))
     Traceback (most recent call last):
     ...
-    jaxsplit.core._errors.InputError: bad: weights must sum to 1 (consistency), got (0.5,)
+    jaxsplit.InputError: bad: weights must sum to 1 (consistency), got (0.5,)
     """
 
     name: str
