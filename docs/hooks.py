@@ -31,16 +31,15 @@ AREAS = {  # package -> (title, one line on what it owns)
 
 
 def public_names() -> dict[str, list[str]]:
-    """{area: [public names]} from the ``PUBLIC`` table of ``jaxsplit/__init__.py`` (read as
-    data: the site builds without importing JAX)."""
+    """{area: [public names]} from the ``from .area._module import X as X`` lines of
+    ``jaxsplit/__init__.py`` (read statically: the package loads them lazily)."""
     tree = ast.parse((ROOT / "jaxsplit" / "__init__.py").read_text())
-    table = next(ast.literal_eval(node.value) for node in tree.body
-                 if isinstance(node, ast.Assign) and getattr(node.targets[0], "id", None) == "PUBLIC")
     areas: dict[str, list[str]] = {area: [] for area in AREAS}
-    for module, names in table.items():
-        area = module.split(".")[0]
-        if area in areas:
-            areas[area] += list(names)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.level == 1 and node.module:
+            area = node.module.split(".")[0]
+            if area in areas:
+                areas[area] += [alias.asname or alias.name for alias in node.names]
     return areas
 
 
@@ -98,13 +97,15 @@ nbformat.write(nb, sys.argv[3])
 
 def execute_notebooks(sources, out: pathlib.Path, small: bool = True) -> dict:
     """Execute every notebook at once (in parallel processes: compilation is single-threaded) into
-    ``out``; {name: (exit code, stderr)}. ``small`` sets JAXSPLIT_NOTEBOOK_SMALL=1 (reduced sizes)."""
+    ``out``; {name: (exit code, stderr)}. ``small`` sets JAXSPLIT_NOTEBOOK_SMALL=1 (reduced sizes).
+    The kernels import ``jaxsplit`` from this checkout (PYTHONPATH), whatever is installed."""
     import subprocess
     import sys
 
     out.mkdir(parents=True, exist_ok=True)
     # the inline backend, so that figures are stored in the executed copy (no display is needed)
     env = dict(os.environ, MPLBACKEND="module://matplotlib_inline.backend_inline",
+               PYTHONPATH=os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]),
                **({"JAXSPLIT_NOTEBOOK_SMALL": "1"} if small else {}))
     procs = {nb.name: subprocess.Popen([sys.executable, "-c", _RUNNER, str(nb), str(nb.parent), str(out / nb.name)],
                                        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -133,7 +134,7 @@ def _audit_page() -> tuple[str, list[pathlib.Path]]:
     report = audit / "report.md"
     if not report.exists():
         return ("# Audit of the seed paper\n\nEvery checkable claim of the seed paper is re-derived numerically "
-                "by `jaxsplit paper --out build/audit` (about a minute): `claims.json` (id, statement, "
+                "by `jaxsplit paper --out build/audit` (~95 s on 2 cores): `claims.json` (id, statement, "
                 "verdict, evidence), `report.md` and figures. Run it, then rebuild the site: this page then "
                 "shows the report.\n"), []
     return report.read_text(), sorted(p for p in audit.iterdir() if p.suffix in (".png", ".svg"))
