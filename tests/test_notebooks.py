@@ -10,8 +10,8 @@ NOTEBOOKS = sorted((pathlib.Path(__file__).parent.parent / "notebooks").glob("*.
 pytestmark = pytest.mark.xdist_group("notebooks")  # one worker executes the notebooks once, for both files
 
 
-def test_there_are_three_stories():
-    assert len(NOTEBOOKS) >= 3
+def test_there_are_four_stories():
+    assert len(NOTEBOOKS) >= 4
 
 
 @pytest.mark.parametrize("name", [nb.name for nb in NOTEBOOKS])

@@ -186,11 +186,49 @@ def test_parameters_are_traced():
     (lambda: jaxsplit.gravity_gradient([1.0, 2.0, np.inf], 0.1), "inertia must be finite"),
     (lambda: jaxsplit.attitude([1.0, 2.0]), "3 components"),
     (lambda: jaxsplit.attitude(INERTIA, quaternion="yes"), "quaternion must be True or False"),
+    (lambda: jaxsplit.heavy_top([1.0, np.nan, 2.0], CHI), "inertia must be finite"),
+    (lambda: jaxsplit.gravity_gradient(INERTIA, np.inf), "rate must be finite and >= 0"),
+    (lambda: jaxsplit.heavy_top(INERTIA, "up"), "center_of_mass must be numeric"),
 ])
 def test_bad_parameters_are_one_line_errors(build, message):
     with pytest.raises(InputError, match=message) as info:
         build()
     assert "\n" not in str(info.value)
+
+
+GOOD_STATES = [  # (system, state): every one passes check_state
+    (jaxsplit.heavy_top(INERTIA, CHI), (M, GAMMA)),
+    (jaxsplit.gravity_gradient(INERTIA, 0.7), (jnp.stack([M, -M]), jnp.stack([GAMMA, -GAMMA]))),  # a batch
+    (jaxsplit.heavy_top(INERTIA, CHI), (M.astype(jnp.float32), (GAMMA * (1 + 1e-4)).astype(jnp.float32))),
+    (jaxsplit.attitude(INERTIA), (M, Q0)),
+    (jaxsplit.attitude(INERTIA, quaternion=True), (M, QUAT)),
+]
+BAD_STATES = [  # (system, state, message)
+    (jaxsplit.heavy_top(INERTIA, CHI), (M, 2 * GAMMA), r"Γ must be a unit vector .* got \|Γ\| = \[2.0\]"),
+    (jaxsplit.heavy_top(INERTIA, CHI), (M, GAMMA * (1 + 1e-4)), "Γ must be a unit vector"),  # float64: √ε = 1.5e-8
+    (jaxsplit.gravity_gradient(INERTIA, 0.7), (M.at[1].set(np.nan), GAMMA), "must be finite, got \\[nan\\]"),
+    (jaxsplit.attitude(INERTIA), (M, 1.01 * Q0), "Q must be orthogonal"),
+    (jaxsplit.attitude(INERTIA), (M, Q0 * jnp.array([1.0, 1.0, -1.0])), "Q must be a rotation, not a reflection"),
+    (jaxsplit.attitude(INERTIA, quaternion=True), (M, 1.1 * QUAT), "q must be a unit quaternion"),
+    (jaxsplit.heavy_top(INERTIA, CHI), M, r"tuple \(m, Γ\)"),
+]
+
+
+@pytest.mark.parametrize("system, state", GOOD_STATES)
+def test_good_states_pass_the_state_check(system, state):
+    assert system.check_state(state) is state
+
+
+@pytest.mark.parametrize("system, state, message", BAD_STATES)
+def test_bad_states_are_one_line_errors(system, state, message):
+    with pytest.raises(InputError, match=message) as info:
+        system.check_state(state)
+    assert "\n" not in str(info.value)
+
+
+def test_exact_solution_checks_the_attitude():
+    with pytest.raises(InputError, match="Q must be a rotation"):
+        jaxsplit.exact_solution(INERTIA, (M, -Q0), 1.0)
 
 
 def test_zero_weight_is_a_free_body_carrying_the_vertical():

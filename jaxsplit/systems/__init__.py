@@ -8,8 +8,9 @@ potential kick) with ``_heavy_top`` and ``_gravity_gradient``, ``_exact`` (the f
 exact solution for any inertia, on the JAX elliptic functions of ``_elliptic``), ``_spin``
 (rotations by a vanishing angle vector, the spin about m, commuting pieces),
 ``_hamilton_poisson`` (a system from two functions: the paper's §2–3 examples),
-``_splitting`` (``splitting``: system + scheme -> step), ``so3`` (rotations, quaternions,
-rotation flows that turn declared parts of a state).
+``_splitting`` (``splitting``: system + scheme -> step), ``_validate`` (one-line errors for bad
+concrete parameters and states: ``check_state`` of the spinning-body systems), ``so3``
+(rotations, quaternions, rotation flows that turn declared parts of a state).
 """
 
 from . import so3 as so3

@@ -29,11 +29,13 @@ from typing import ClassVar
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ..core._errors import InputError
 from ._base import AbstractSystem
-from ._rigid_body import RigidBody, check_inertia
+from ._rigid_body import RigidBody, check_inertia, is_concrete
 from ._spin import Commuting, MomentumSpin
+from ._validate import check_finite_state, check_unit
 from .so3 import AxisRotation, check_shape, hat, quaternion_to_matrix
 
 
@@ -68,6 +70,22 @@ class Attitude(AbstractSystem):
             raise InputError(f"the attitude state is a tuple (m, {'q' if self.quaternion else 'Q'}), got "
                              f"{type(x).__name__}")
         return check_shape(x[0], "momentum"), check_shape(x[1], self.part)
+
+    def check_state(self, x):
+        """``x`` as a state of this system, checked where concrete: (m, Q) finite with Q ∈ SO(3)
+        (QᵀQ = 1 and det Q = 1 to √ε of its dtype), or (m, q) with |q| = 1. Returns ``x``."""
+        _, a = self._split_state(x)
+        check_finite_state(x, "the attitude state")
+        if is_concrete(a):
+            a = np.asarray(a)
+            if self.quaternion:
+                check_unit(np.linalg.norm(a, axis=-1), "q must be a unit quaternion", "|q|", a.dtype)
+            else:
+                gram = np.swapaxes(a, -1, -2) @ a
+                check_unit(1 + np.max(np.abs(gram - np.eye(3)), axis=(-1, -2)), "Q must be orthogonal",
+                           "1 + max|QᵀQ − 1|", a.dtype)
+                check_unit(np.linalg.det(a), "Q must be a rotation, not a reflection", "det Q", a.dtype)
+        return x
 
     def rotation(self, x):
         """Q: the attitude as a rotation matrix (from the quaternion when ``quaternion``)."""

@@ -50,6 +50,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..core._errors import InputError
+from ._attitude import Attitude
 from ._elliptic import incomplete_pi, jacobi_reduced, legendre_integrals, safe_sqrt
 from ._rigid_body import RigidBody, as_float_array, is_concrete
 from ._spin import exp_hat
@@ -194,6 +195,8 @@ def exact_solution(body, x0, t):
     if m0.shape != (3,):
         raise InputError(f"exact_solution takes one state, m0 of shape (3,), got {tuple(m0.shape)} (jax.vmap over "
                          "states)")
+    if attitude:
+        Attitude(inertia).check_state((m0, q0))
     t = jnp.asarray(t, dtype=m0.dtype)
     if is_concrete(t) and not np.all(np.isfinite(np.asarray(t))):
         raise InputError("t must be finite times")

@@ -19,8 +19,9 @@ stabilises the maximum gyroscopically.
 import jax
 import jax.numpy as jnp
 
-from ._potential import BodyInPotential, check_non_negative
+from ._potential import BodyInPotential
 from ._rigid_body import check_inertia
+from ._validate import check_non_negative
 
 
 class GravityGradient(BodyInPotential):

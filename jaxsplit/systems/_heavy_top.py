@@ -18,8 +18,9 @@ are not (``fit`` sees one null direction of the Gauss–Newton Hessian if both a
 import jax
 import jax.numpy as jnp
 
-from ._potential import BodyInPotential, check_non_negative, check_vector
+from ._potential import BodyInPotential
 from ._rigid_body import check_inertia
+from ._validate import check_non_negative, check_vector
 
 
 class HeavyTop(BodyInPotential):

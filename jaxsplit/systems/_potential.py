@@ -32,8 +32,9 @@ import numpy as np
 from ..core._errors import InputError
 from ..core._flows import AbstractFlow
 from ._base import AbstractSystem
-from ._rigid_body import as_float_array, is_concrete
+from ._rigid_body import is_concrete
 from ._spin import Commuting, MomentumSpin
+from ._validate import check_finite_state, check_unit
 from .so3 import AxisRotation, check_shape, hat
 
 PARTS = ("momentum", "vector")
@@ -50,27 +51,6 @@ class PotentialKick(AbstractFlow):
         m, gamma = check_shape(state[0], "momentum"), check_shape(state[1], "vector")
         force = jax.grad(lambda g: jnp.sum(self.potential(g)))(gamma)
         return (m + t * jnp.cross(gamma, force), gamma)
-
-
-def check_vector(value, name: str):
-    """A finite (..., 3) array (checked when concrete)."""
-    arr = as_float_array(value, name)
-    if is_concrete(arr):
-        if arr.ndim < 1 or arr.shape[-1] != 3:
-            raise InputError(f"{name} must have 3 components, got shape {tuple(arr.shape)}")
-        if not np.all(np.isfinite(np.asarray(arr))):
-            raise InputError(f"{name} must be finite, got {np.asarray(arr).tolist()}")
-    return arr
-
-
-def check_non_negative(value, name: str):
-    """A finite number (or batch) >= 0 (checked when concrete)."""
-    arr = as_float_array(value, name)
-    if is_concrete(arr):
-        values = np.asarray(arr)
-        if not np.all(np.isfinite(values)) or not np.all(values >= 0):
-            raise InputError(f"{name} must be finite and >= 0, got {values.tolist()}")
-    return arr
 
 
 class BodyInPotential(AbstractSystem):
@@ -94,6 +74,16 @@ class BodyInPotential(AbstractSystem):
         if not (isinstance(x, tuple) and len(x) == 2):
             raise InputError(f"the state of {self.name} is a tuple (m, Γ), got {type(x).__name__}")
         return check_shape(x[0], "momentum"), check_shape(x[1], "vector")
+
+    def check_state(self, x):
+        """``x`` as a state of this system, checked where concrete: a tuple (m, Γ) of finite
+        (..., 3) arrays with Γ a unit vector (to √ε of its dtype; |Γ| is a Casimir, so a state
+        from a long run passes). Returns ``x``."""
+        _, gamma = self._parts(x)
+        check_finite_state(x, f"the state of {self.name}")
+        if is_concrete(gamma):
+            check_unit(np.linalg.norm(np.asarray(gamma), axis=-1), "Γ must be a unit vector", "|Γ|", gamma.dtype)
+        return x
 
     def kinetic_energy(self, x):
         m, _ = self._parts(x)

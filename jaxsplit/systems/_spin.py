@@ -2,7 +2,8 @@
 
 ``exp_hat(a)`` = exp(hat(a)) (Rodrigues) and ``turn(v, a)`` = exp(−hat(a)) v are written with
 sin|a|/|a| and (1 − cos|a|)/|a|² evaluated by their Taylor series near a = 0, so values and
-derivatives are finite everywhere (a steady rotation with ω = 0, a top with m = 0).
+derivatives are finite everywhere (a steady rotation with ω = 0, a top with m = 0), and
+applied as increments so that repeated turns keep norms without a rounding bias.
 
 ``MomentumSpin(rate, parts)`` is the exact flow of ½ c |m|² on a state whose parts are declared
 as in ``so3``: m is fixed (m × ∇ = c m × m = 0) and every other part turns by
@@ -21,27 +22,28 @@ import jax
 import jax.numpy as jnp
 
 from ..core._flows import AbstractFlow
-from .so3 import check_parts, check_shape, momentum, quaternion_multiply
+from .so3 import check_parts, check_shape, cos_sin, momentum, quaternion_multiply
 
 _SMALL = 1e-4  # below this |a| the Taylor series (to a⁴) are exact to round-off in float64
 
 
-def _sinc_and_versine(a):
-    """(sin|a|/|a|, (1 − cos|a|)/|a|², cos|a|) with |a|² = a·a, smooth at a = 0."""
+def _half_sinc_cos(a):
+    """(sin(|a|/2)/(|a|/2), cos(|a|/2)) with |a|² = a·a, smooth at a = 0 (one ``cos_sin`` of |a|/2)."""
     sq = jnp.sum(a * a, axis=-1)
     small = sq < _SMALL**2
-    safe = jnp.where(small, 1.0, sq)
-    norm = jnp.sqrt(safe)
-    sinc = jnp.where(small, 1 - sq / 6 + sq * sq / 120, jnp.sin(norm) / norm)
-    versine = jnp.where(small, 0.5 - sq / 24 + sq * sq / 720, (1 - jnp.cos(norm)) / safe)
-    cos = jnp.where(small, 1 - sq / 2 + sq * sq / 24, jnp.cos(norm))
-    return sinc, versine, cos
+    half = 0.5 * jnp.sqrt(jnp.where(small, 1.0, sq))
+    cos_half, sin_half = cos_sin(half)
+    return (jnp.where(small, 1 - sq / 24 + sq * sq / 1920, sin_half / half),
+            jnp.where(small, 1 - sq / 8 + sq * sq / 384, cos_half))
 
 
 def turn(v, a):
-    """exp(−hat(a)) v = v cos|a| − (a × v) sin|a|/|a| + a ⟨a, v⟩ (1 − cos|a|)/|a|²."""
-    sinc, versine, cos = (x[..., None] for x in _sinc_and_versine(a))
-    return cos * v - sinc * jnp.cross(a, v) + versine * jnp.sum(a * v, axis=-1, keepdims=True) * a
+    """exp(−hat(a)) v = v − (a × v) sin|a|/|a| + a × (a × v)(1 − cos|a|)/|a|², applied from the half
+    angle as an increment (as in ``so3.half_cos_sin``: norms kept without a rounding bias):
+    v − σ (cos(|a|/2) a × v − ½σ a × (a × v)), σ = sin(|a|/2)/(|a|/2)."""
+    sinc, cos = (x[..., None] for x in _half_sinc_cos(a))
+    av = jnp.cross(a, v)
+    return v - sinc * (cos * av - 0.5 * sinc * jnp.cross(a, av))
 
 
 def exp_hat(a):
@@ -51,11 +53,13 @@ def exp_hat(a):
     return jnp.swapaxes(turn(eye, -a[..., None, :]), -1, -2)
 
 
-def half_turn_quaternion(a):
-    """(cos(|a|/2), sin(|a|/2) a/|a|): the quaternion of exp(hat(a))."""
+def half_turn_increment(a):
+    """r − 1 for r = (cos(|a|/2), sin(|a|/2) a/|a|), the quaternion of exp(hat(a)), from the quarter
+    angle: σ (−½σ |a/2|², cos(|a|/4) a/2) with σ = sin(|a|/4)/(|a|/4); q ⊗ r = q + q ⊗ (r − 1)."""
     half = a / 2
-    sinc, _, cos = _sinc_and_versine(half)
-    return jnp.concatenate([cos[..., None], sinc[..., None] * half], axis=-1)
+    sinc, cos = _half_sinc_cos(half)
+    scalar = -0.5 * sinc * jnp.sum(half * half, axis=-1)
+    return sinc[..., None] * jnp.concatenate([scalar[..., None], cos[..., None] * half], axis=-1)
 
 
 class MomentumSpin(AbstractFlow):
@@ -78,7 +82,7 @@ class MomentumSpin(AbstractFlow):
             elif part == "attitude":  # rows of Q turn like body vectors: Q exp(hat a)
                 out.append(turn(leaf, a[..., None, :]))
             elif part == "quaternion":
-                out.append(quaternion_multiply(leaf, half_turn_quaternion(a)))
+                out.append(leaf + quaternion_multiply(leaf, half_turn_increment(a)))
             else:  # m itself (exactly fixed) and "fixed" parts
                 out.append(leaf)
         return type(state)(*out) if hasattr(state, "_fields") else tuple(out)

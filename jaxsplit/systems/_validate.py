@@ -1,0 +1,56 @@
+"""Validation of concrete system parameters and states: one-line ``InputError``s that name the
+bad value and what is allowed. Traced values pass unchecked (shapes are checked while tracing
+elsewhere), so the checks cost nothing inside jit, vmap and grad.
+"""
+
+import jax
+import numpy as np
+
+from ..core._errors import InputError
+from ._rigid_body import as_float_array, is_concrete
+
+
+def check_vector(value, name: str):
+    """A finite (..., 3) array (checked when concrete)."""
+    arr = as_float_array(value, name)
+    if is_concrete(arr):
+        if arr.ndim < 1 or arr.shape[-1] != 3:
+            raise InputError(f"{name} must have 3 components, got shape {tuple(arr.shape)}")
+        if not np.all(np.isfinite(np.asarray(arr))):
+            raise InputError(f"{name} must be finite, got {np.asarray(arr).tolist()}")
+    return arr
+
+
+def check_non_negative(value, name: str):
+    """A finite number (or batch) >= 0 (checked when concrete)."""
+    arr = as_float_array(value, name)
+    if is_concrete(arr):
+        values = np.asarray(arr)
+        if not np.all(np.isfinite(values)) or not np.all(values >= 0):
+            raise InputError(f"{name} must be finite and >= 0, got {values.tolist()}")
+    return arr
+
+
+def _show(values) -> str:
+    """A short one-line rendering of concrete values (a batch by its count and worst entry)."""
+    values = np.asarray(values)
+    if values.size <= 9:
+        return str(np.round(values, 12).tolist())
+    return f"{values.size} values incl. {np.round(values.reshape(-1)[0], 12)}"
+
+
+def check_finite_state(x, label: str):
+    """Every leaf of a concrete state finite."""
+    for k, leaf in enumerate(jax.tree_util.tree_leaves(x)):
+        if is_concrete(leaf) and not np.all(np.isfinite(np.asarray(leaf))):
+            bad = np.asarray(leaf)[~np.isfinite(np.asarray(leaf))]
+            raise InputError(f"{label} must be finite, got {_show(bad)} in part {k}")
+
+
+def check_unit(values, what: str, name: str, dtype):
+    """``values`` (norms, or deviations + 1) equal to 1 to √ε of ``dtype``."""
+    tol = float(np.sqrt(np.finfo(dtype).eps))
+    values = np.asarray(values, dtype=float)
+    off = np.abs(values - 1) > tol
+    if np.any(off):
+        raise InputError(f"{what} ({name} = 1 to {tol:.1e}), got {name} = {_show(values[off])}")
