@@ -234,19 +234,19 @@ def simulate_figure(t, spheres, error_groups, maxima, *, title="", t_label="time
     return fig
 
 
-def sweep_figure(table, *, title=""):
+def sweep_figure(table, *, title="", order=None):
     """Errors of a sweep against the step size, one line per group of inertia ratios.
 
     ``table``: {"h": (N,), "group": (N,) labels, "<metric>": (N,)} for the metrics
     ``error``, ``energy_error``, ``casimir_error``: median (solid) and max (dashed) over the
-    cases of each (group, h)."""
+    cases of each (group, h); ``order`` lists the groups in legend order."""
     plt = _pyplot()
     metrics = [("error", "error vs reference\nmax|x_n - x_ref|"), ("energy_error", "energy error\nmax|H/H0 - 1|"),
                ("casimir_error", "Casimir error\nmax|C/C0 - 1|")]
     metrics = [m for m in metrics if m[0] in table]
-    fig, axes = plt.subplots(1, len(metrics), figsize=(4.4 * len(metrics) + 2.2, 4.6), dpi=110, squeeze=False)
+    fig, axes = plt.subplots(1, len(metrics), figsize=(4.2 * len(metrics) + 2.6, 4.6), dpi=110, squeeze=False)
     axes = axes[0]
-    groups = list(dict.fromkeys(table["group"].tolist()))
+    groups = list(order) if order is not None else list(dict.fromkeys(table["group"].tolist()))
     h = np.asarray(table["h"])
     for ax, (key, label) in zip(axes, metrics):
         values = np.asarray(table[key], dtype=float)
@@ -258,6 +258,12 @@ def sweep_figure(table, *, title=""):
             shown = lambda v: np.maximum(np.asarray(v), _FLOOR)
             ax.loglog(hs, shown(med), "o-", color=color, ms=3.5, lw=1.2, label=g)
             ax.loglog(hs, shown(top), "--", color=color, lw=0.9, alpha=0.7)
+        ticks = np.unique(h)
+        if len(ticks) <= 8:  # label the step sizes themselves (log minor labels overlap)
+            import matplotlib.ticker
+
+            ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+            ax.set_xticks(ticks, [f"{x:.3g}" for x in ticks])
         ax.set_xlabel("step size h")
         ax.set_title(label, fontsize=9.5)
         ax.grid(True, which="major", alpha=0.4)
@@ -266,7 +272,7 @@ def sweep_figure(table, *, title=""):
     axes[-1].legend(loc="center left", bbox_to_anchor=(1.02, 0.5), fontsize=8, frameon=False)
     if title:
         fig.suptitle(title, fontsize=10.5)
-    fig.subplots_adjust(left=0.06, right=0.8, bottom=0.14, top=0.82, wspace=0.3)
+    fig.subplots_adjust(left=0.06, right=0.78, bottom=0.14, top=0.82, wspace=0.32)
     return fig
 
 

@@ -246,7 +246,7 @@ class Method(NamedTuple):
     scheme: Any
     split: str
     options: dict
-    chosen: bool  # the split was chosen for the scheme (no --split given)
+    chosen: bool  # the scheme does not fit the system's default split: another was chosen
 
     @property
     def shift_label(self):
@@ -302,4 +302,4 @@ def scheme_and_split(args, prob: Problem, option: str = "--scheme") -> Method:
     if shift is not None and not takes_shift:
         raise InputError(f"--shift-axis applies only with a shifted split (--split casimir of rigid-body, spin of "
                          f"attitude), not --split {name}")
-    return Method(scheme, name, options, requested is None)
+    return Method(scheme, name, options, requested is None and name != system.default_split)
