@@ -241,3 +241,28 @@ def test_figure_orbit_never_joins_far_apart_states():
     tt, ee = envelope(t, spikes, 1000)
     assert len(tt) <= 1100 and ee.max() == 3.0 and set(tt[ee > 0]) == {17.0, 50_001.0, 99_999.0}
     assert spikes[::101].max() < 3.0  # a stride would have missed it
+
+
+# ---------------------------------------------------------------- --tol (jaxsplit.auto_splitting, branch speed)
+def test_tol_runs_what_auto_splitting_chose(monkeypatch, capsys):
+    """The CLI side of --tol against auto_splitting's signature (system, x0, *, tol, t_end) and
+    result fields; the library function is stood in for here, its choices are tested where it lives."""
+    from collections import namedtuple
+
+    choice = namedtuple("AutoSplitting", "step h n_steps scheme split options predicted_error cost candidates")
+    calls = []
+
+    def auto_splitting(system, x0, *, tol, t_end):
+        calls.append((type(system).__name__, np.asarray(x0).tolist(), tol, t_end))
+        return choice(None, 0.05, 40, "strang", "casimir", {"shift": 1}, 3e-6, 120.0, ())
+
+    monkeypatch.setattr(jaxsplit, "auto_splitting", auto_splitting, raising=False)
+    assert main(["simulate", "--tol", "1e-5", "--t-end", "2", "--inertia", "3,2,1.5", "--no-save", "--json"]) == 0
+    s = _json(capsys)
+    assert calls == [("RigidBody", [0.6, 0.0, 0.8], 1e-5, 2.0)]
+    assert (s["scheme"], s["split"], s["shift_axis"], s["dt"], s["steps"]) == ("strang", "casimir", 2, 0.05, 40)
+    assert s["tol"] == 1e-5 and s["predicted_error"] == 3e-6
+    assert s["exact_error_max"] < 1e-4  # what the run measured, next to the prediction
+    monkeypatch.delattr(jaxsplit, "auto_splitting")
+    assert main(["simulate", "--tol", "1e-5", "--no-save"]) == 2
+    assert "--tol needs jaxsplit.auto_splitting" in capsys.readouterr().err

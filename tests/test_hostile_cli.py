@@ -190,6 +190,8 @@ SYSTEMS = [
     (["--seed", "-3"], ["--seed", "'-3'"]),
     (["--dtype", "float16"], ["--dtype", "invalid choice", "'float16'"]),
     (["--reference", "elliptic"], ["--reference", "invalid choice"]),
+    (["--tol", "1e-8", "--scheme", "strang", "--dt", "0.1"], ["--tol chooses the scheme", "drop --scheme, --dt"]),
+    (["--tol", "0"], ["--tol", "positive"]),
 ]
 CHECK_SYSTEMS = [
     (["--system", "heavy-top", "--reference", "exact"], ["--reference exact", "use --reference numerical"]),

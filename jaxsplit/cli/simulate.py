@@ -79,15 +79,19 @@ def add_parser(sub):
     g = p.add_argument_group("problem")
     _problem.add_system_arguments(g)
     g = p.add_argument_group("method")
-    g.add_argument("--scheme", default="lie-trotter", help="any name from `jaxsplit schemes` (default lie-trotter)")
+    g.add_argument("--scheme", default=None, help="any name from `jaxsplit schemes` (default lie-trotter)")
     _problem.add_split_arguments(g)
-    g.add_argument("--dt", type=_args.nonzero_float, default=DEFAULT_DT, metavar="H",
+    g.add_argument("--dt", type=_args.nonzero_float, default=None, metavar="H",
                    help=f"step size, non-zero; negative runs backwards (default {DEFAULT_DT})")
     n = g.add_mutually_exclusive_group()
     n.add_argument("--steps", type=_args.positive_int, metavar="N",
                    help=f"number of steps (default {DEFAULT_STEPS:,}, or up to the last --save-at time)")
     n.add_argument("--t-end", type=_args.positive_float, metavar="T",
                    help="duration; steps = round(T / |H|)")
+    g.add_argument("--tol", type=_args.positive_float, metavar="TOL",
+                   help="choose the scheme, split and step that reach max-norm error TOL at --t-end (default "
+                        f"{DEFAULT_STEPS * DEFAULT_DT:g}) at the least modelled cost (jaxsplit.auto_splitting); "
+                        "excludes --scheme, --split, --shift-axis, --dt, --steps")
     g.add_argument("--dtype", choices=("float64", "float32"), default="float64",
                    help="precision of the integration (diagnostics are computed in float64; default float64)")
     g.add_argument("--renormalize", action="store_true",
@@ -247,15 +251,44 @@ class _Plan(NamedTuple):
     out: Path | None
     fmt: str | None
     figure: Path | None
+    auto: object = None  # what --tol chose (jaxsplit.auto_splitting)
+
+
+def _auto(args, prob):
+    """--tol: (method, step size, step count, the library's choice) from ``jaxsplit.auto_splitting``."""
+    given = [flag for flag, value in (("--scheme", args.scheme), ("--split", args.split),
+                                      ("--shift-axis", args.shift_axis), ("--dt", args.dt), ("--steps", args.steps))
+             if value is not None]
+    if given:
+        raise InputError(f"--tol chooses the scheme, the split and the step: drop {', '.join(given)} (give --t-end)")
+    import jaxsplit
+
+    auto_splitting = getattr(jaxsplit, "auto_splitting", None)
+    if auto_splitting is None:
+        raise InputError("--tol needs jaxsplit.auto_splitting (the automatic choice of scheme, split and step), which "
+                         "this build of jaxsplit does not have; give --scheme and --dt instead")
+    t_end = args.t_end if args.t_end is not None else (
+        float(np.max(np.abs(args.save_at))) if args.save_at is not None else DEFAULT_STEPS * DEFAULT_DT)
+    choice = auto_splitting(prob.system, prob.state(), tol=args.tol, t_end=t_end)
+    n_steps = _bounds.at_most(int(choice.n_steps), _bounds.MAX_STEPS, "the step count --tol chose",
+                              "step indices exact in float64", "give a larger --tol or a shorter --t-end")
+    method = _problem.Method(_bounds.scheme(choice.scheme), choice.split, dict(choice.options), True)
+    return method, float(choice.h), n_steps, choice
 
 
 def _plan(args, outputs) -> _Plan:
     prob = _problem.problem(args)
-    method = _problem.scheme_and_split(args, prob)
     if args.reference == "exact" and not prob.exact:
         raise InputError(f"--reference exact: the exact (Jacobi elliptic) solution is the free body's (--system "
                          f"rigid-body or attitude); --system {prob.name} has none")
-    n_steps = _steps(args, args.save_at)
+    auto = None
+    if args.tol is not None:
+        method, args.dt, n_steps, auto = _auto(args, prob)
+    else:
+        args.scheme = args.scheme or "lie-trotter"
+        args.dt = DEFAULT_DT if args.dt is None else args.dt
+        method = _problem.scheme_and_split(args, prob)
+        n_steps = _steps(args, args.save_at)
     at = _save_at(args.save_at, n_steps, args.dt)
     save_every = _bounds.at_most(args.save_every, _bounds.MAX_STEPS, "--save-every", "step indices exact in float64")
     _bounds.saved_states(n_steps, save_every, _bytes_per_saved(prob), _bounds.memory_limit(args.max_memory),
@@ -269,7 +302,8 @@ def _plan(args, outputs) -> _Plan:
               "a projection); " + ("--renormalize projects them back after every step (a projection, not part of "
                                    "the scheme)" if args.renormalize else "--renormalize projects them back")
               + "; the summary measures the drift in float64")
-    return _Plan(prob, method, prob.exact and args.reference != "none", n_steps, save_every, at, out, fmt, figure)
+    return _Plan(prob, method, prob.exact and args.reference != "none", n_steps, save_every, at, out, fmt, figure,
+                 auto)
 
 
 # --------------------------------------------------------------------------- run
@@ -357,6 +391,7 @@ def _report(args, outputs, plan, result, step):
         "steps_per_second": result.completed / result.seconds if result.seconds > 0 else None,
         "status": status, "nonfinite_step": result.nonfinite_step,
         "dtype": args.dtype, "projection": projection, "noise": args.noise or None,
+        "tol": args.tol, "predicted_error": None if plan.auto is None else float(plan.auto.predicted_error),
     }
 
     # ---- outputs (also, and especially, for a stopped run: never lose work)
@@ -374,7 +409,8 @@ def _report(args, outputs, plan, result, step):
             arrays |= {f"{k}_exact": v for k, v in _parts(prob, _chunked.rows(exact, rows)).items()}
         meta = _metadata.run_metadata("simulate") | prob.parameters | {
             k: summary[k] for k in ("scheme", "order", "split", "shift_axis", "dt", "steps_requested", "save_every",
-                                    "status", "nonfinite_step", "dtype", "projection", "reference")
+                                    "status", "nonfinite_step", "dtype", "projection", "reference", "tol",
+                                    "predicted_error")
         } | {"steps_completed": result.completed, "allow_nonphysical": args.allow_nonphysical,
              "rows": "the --save-at times (partial steps)" if at else "every --save-every-th step",
              "noise": args.noise, "seed": args.seed if args.noise > 0 else None}
@@ -526,6 +562,9 @@ def _print_summary(s, prob):
     params = "; ".join(f"{k.replace('_', ' ')} = {_problem.fmt_value(v)}" for k, v in prob.parameters.items()
                        if k != "system")
     print(f"  {prob.name}: {params}")
+    if s["tol"] is not None:
+        print(f"  --tol {s['tol']:g}: scheme, split and step chosen by jaxsplit.auto_splitting (predicted max error "
+              f"{s['predicted_error']:.2e} at t = {s['t_end']:g})")
     every = "" if s["save_every"] == 1 else f", every {s['save_every']:,}th step"
     at = f" and the {s['states_at_times']:,} states at --save-at times" if s["save_at"] else ""
     print(f"  over the {s['saved_states']:,} saved states{every}{at}:")
