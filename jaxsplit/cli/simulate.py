@@ -285,7 +285,7 @@ def _plan(args, outputs) -> _Plan:
     if args.tol is not None:
         method, args.dt, n_steps, auto = _auto(args, prob)
     else:
-        args.scheme = args.scheme or "lie-trotter"
+        args.scheme = "lie-trotter" if args.scheme is None else args.scheme
         args.dt = DEFAULT_DT if args.dt is None else args.dt
         method = _problem.scheme_and_split(args, prob)
         n_steps = _steps(args, args.save_at)
