@@ -161,8 +161,8 @@ def _inputs(args) -> dict:
                          "cases, t_end=..., system=<a family params -> system>) (see its docstring)")
     s = _bounds.scheme(args.scheme)
     scheme = s.name
-    if args.split is None:  # a scheme of exactly two pieces composes the Casimir split
-        args.split = "axes" if s.pieces_allowed(3) else "casimir"
+    if args.split is None:  # a scheme of exactly two pieces, or a --shift-axis, asks for the Casimir split
+        args.split = "axes" if s.pieces_allowed(3) and args.shift_axis is None else "casimir"
     reference = _bounds.scheme(args.reference_scheme, "--reference-scheme").name
     if args.reference_angle > 0.5:
         raise InputError(f"--reference-angle must be <= 0.5, got {args.reference_angle:g}")
