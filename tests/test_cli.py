@@ -78,21 +78,26 @@ def test_json_summary_matches_the_saved_trajectory(capsys, tmp_path):
 
 
 def test_csv_holds_the_same_trajectory_as_npz(capsys, tmp_path):
+    from jaxsplit.cli._data import read
+
     common = ["simulate", "--inertia", "3,2,1.5", "--m0", "0.2,-0.9,0.3", "--scheme", "kahan-li-6",
               "--split", "casimir", "--t-end", "2", "--dt", "0.1", "--no-figure", "--quiet"]
     assert main(common + ["--out", str(tmp_path / "a.npz")]) == 0
     assert main(common + ["--out", str(tmp_path / "b"), "--format", "csv"]) == 0
     capsys.readouterr()
-    with np.load(tmp_path / "a.npz") as z:
-        m, meta = z["m"], read_metadata(z)
-    assert "m_exact" not in np.load(tmp_path / "a.npz").files  # asymmetric body: no exact solution
+    npz, meta = read(str(tmp_path / "a.npz"))
+    csv, csv_meta = read(str(tmp_path / "b.csv"))
     text = (tmp_path / "b.csv").read_text().splitlines()
-    assert text[0].startswith("# metadata: ")
-    assert json.loads(text[0][len("# metadata: "):])["inertia"] == meta["inertia"] == [3.0, 2.0, 1.5]
-    assert text[1] == "# step,t,m1,m2,m3,energy,casimir"
-    data = np.loadtxt(tmp_path / "b.csv", delimiter=",")
-    np.testing.assert_array_equal(data[:, 2:5], m)  # %.17g round-trips float64 exactly
-    assert meta["steps_requested"] == 20 and meta["shift_axis"] == 2
+    assert text[0].startswith("# metadata: ") and csv_meta == meta
+    assert text[1] == "# t,step,m1,m2,m3,energy,casimir,m_exact1,m_exact2,m_exact3"
+    assert sorted(csv) == sorted(npz)
+    for key, value in npz.items():  # %.17g round-trips float64 exactly
+        np.testing.assert_array_equal(csv[key], value)
+    assert meta["inertia"] == [3.0, 2.0, 1.5] and meta["steps_requested"] == 20 and meta["shift_axis"] == 2
+    # An asymmetric body has its exact (elliptic) solution too.
+    exact = jaxsplit.exact_solution(jaxsplit.RigidBody(jnp.array([3.0, 2.0, 1.5])), jnp.array([0.2, -0.9, 0.3]),
+                                    jnp.asarray(npz["t"]))
+    np.testing.assert_allclose(npz["m_exact"], np.asarray(exact), rtol=0, atol=1e-14)
 
 
 def test_force_overwrites_atomically(capsys, tmp_path):
@@ -302,7 +307,7 @@ def test_memory_refusal_suggests_a_save_every_that_fits():
 
     from jaxsplit import InputError
     from jaxsplit.cli._bounds import saved_states
-    from jaxsplit.cli.simulate import BYTES_PER_SAVED
+    BYTES_PER_SAVED = 2 * 10 * 8  # the free body: t, step, m, exact m and 2 invariants, twice
 
     steps, limit = 10**9, 2**20
     with pytest.raises(InputError) as err:

@@ -35,9 +35,9 @@ SIMULATE = [
     (["--steps", "10", "--t-end", "1"], ["--t-end", "not allowed with", "--steps"]),
     (["--save-every", "0"], ["--save-every", "positive integer"]),
     (["--scheme", "stang"], ["unknown scheme 'stang'", "did you mean", "strang"]),
-    (["--scheme", "blanes-moan-s6-prk"], ["blanes-moan-s6-prk", "--split casimir"]),
+    (["--scheme", "blanes-moan-s6-prk", "--split", "axes"], ["blanes-moan-s6-prk", "--split casimir"]),
     (["--split", "diagonal"], ["--split", "invalid choice", "'diagonal'"]),
-    (["--shift-axis", "2"], ["--shift-axis", "--split casimir"]),
+    (["--split", "axes", "--shift-axis", "2"], ["--shift-axis", "--split casimir"]),
     (["--out", "/nonexistent-dir-jaxsplit/run.npz"], ["/nonexistent-dir-jaxsplit", "does not exist"]),
     (["--out", "/proc/jaxsplit-run.npz"], ["cannot write", "/proc/jaxsplit-run.npz"]),
     (["--out", "run.txt"], ["run.txt", ".npz or .csv"]),
@@ -59,7 +59,7 @@ OTHERS = [
     (["sweep", "--dt", "0.1,-1"], ["--dt", "positive"]),
     (["sweep", "--dt-range", "0.5,0.1"], ["--dt-range", "LOW,HIGH"]),
     (["sweep", "--reference-angle", "2"], ["--reference-angle", "0.5"]),
-    (["sweep", "--scheme", "blanes-moan-s10-prk"], ["blanes-moan-s10-prk", "--split casimir"]),
+    (["sweep", "--scheme", "blanes-moan-s10-prk", "--split", "axes"], ["blanes-moan-s10-prk", "--split casimir"]),
     (["sweep", "--resume"], ["--resume", "--out"]),
 ]
 
@@ -119,13 +119,13 @@ def test_output_path_is_a_directory(capsys, tmp_path):
     assert list(tmp_path.iterdir()) == [] and not tmp_path.with_suffix(".npz").exists()
 
 
-@pytest.mark.parametrize("argv,words", [
-    (["simulate", "--inertia", "1,1,3"], ["not a physical body"]),
-    (["simulate", "--scheme", "stang", "--json"], ["did you mean", "strang"]),
+@pytest.mark.parametrize("module,argv,words", [
+    ("jaxsplit.cli", ["simulate", "--inertia", "1,1,3"], ["not a physical body"]),
+    ("jaxsplit", ["simulate", "--scheme", "stang", "--json"], ["did you mean", "strang"]),  # python -m jaxsplit
 ])
-def test_no_traceback_through_the_real_entry_point(argv, words):
+def test_no_traceback_through_the_real_entry_point(module, argv, words):
     env = dict(os.environ, PYTHONWARNINGS="ignore")
-    proc = subprocess.run([sys.executable, "-m", "jaxsplit.cli", *argv], capture_output=True, text=True,
+    proc = subprocess.run([sys.executable, "-m", module, *argv], capture_output=True, text=True,
                           env=env, timeout=120, check=False)
     assert proc.returncode == 2
     assert proc.stdout == ""

@@ -129,7 +129,7 @@ CHECK = [
     (["--inertia", "1e-320,1,1"], ["1/I1 overflows"]),
     (["--dt", "-inf"], ["--dt", "finite non-zero"]),
     (["--m0", "1e200,1e200,0"], ["--m0", "overflows"]),
-    (["--shift-axis", "2"], ["--shift-axis applies only with --split casimir"]),
+    (["--split", "axes", "--shift-axis", "2"], ["--shift-axis applies only with a shifted split", "--split casimir"]),
 ]
 
 PAPER = [
@@ -144,20 +144,83 @@ PAPER = [
 ]
 
 
+# Systems, --save-at, --noise, --dtype, --reference (issues 9, 11, 13): the same contract.
+SYSTEMS = [
+    (["--system", "heavy-top", "--gamma0", "0,0,2"], ["--gamma0 0,0,2 has norm 2", "unit vector", "0,0,1"]),
+    (["--system", "gravity-gradient", "--gamma0", "0,0,0"], ["--gamma0 0,0,0 has norm 0", "unit vector"]),
+    (["--system", "heavy-top", "--gamma0", "0.577,0.577,0.577"], ["norm 0.999393", "0.57735026918962"]),
+    (["--system", "gravity-gradient", "--rate", "-1"], ["--rate", ">= 0", "'-1'"]),
+    (["--system", "gravity-gradient", "--rate", "inf"], ["--rate", ">= 0"]),
+    (["--system", "heavy-top", "--weight", "-0.5"], ["--weight", ">= 0", "'-0.5'"]),
+    (["--system", "heavy-top", "--weight", "nan"], ["--weight", ">= 0"]),
+    (["--weight", "1"], ["--weight applies only to --system heavy-top", "this is --system rigid-body"]),
+    (["--system", "attitude", "--gamma0", "0,0,1"], ["--gamma0 applies only to --system heavy-top or gravity-gradient"]),
+    (["--system", "heavy-top", "--rate", "1"], ["--rate applies only to --system gravity-gradient"]),
+    (["--system", "attitude", "--q0", "1,1,0,0"], ["--q0 1,1,0,0 has norm 1.41421356", "unit quaternion"]),
+    (["--system", "attitude", "--q0", "1,0,0"], ["--q0", "4 comma-separated", "got 3 values"]),
+    (["--system", "heavy-top", "--inertia", "1,1,3"], ["not a physical body", "--allow-nonphysical"]),
+    (["--system", "heavy-top", "--center-of-mass", "1e308,1e308,0", "--weight", "1e10", "--gamma0", "1,0,0"],
+     ["--system heavy-top", "energy", "overflows"]),
+    (["--system", "heavy-top", "--center-of-mass", "nan,0,0"], ["--center-of-mass", "finite"]),
+    (["--system", "spinning-top"], ["--system", "invalid choice", "'spinning-top'"]),
+    (["--system", "attitude", "--split", "casimir"], ["--split casimir is not offered by --system attitude",
+                                                      "spin", "offered: axes, spin"]),
+    (["--system", "heavy-top", "--inertia", "2,1.5,1", "--split", "symmetric"], ["--split symmetric", "I1 = I2"]),
+    (["--system", "heavy-top", "--inertia", "2,1.5,1", "--scheme", "blanes-moan-s6-prk"],
+     ["blanes-moan-s6-prk", "any split of --system heavy-top", "axes: 4 pieces"]),
+    (["--system", "gravity-gradient", "--reference", "exact"], ["--reference exact", "free body", "has none"]),
+    (["--system", "attitude", "--split", "axes", "--shift-axis", "1"], ["--shift-axis applies only", "spin"]),
+    (["--save-at", "5", "--steps", "10"], ["--save-at 5 is after the end of the run", "t = 0.1", "--t-end"]),
+    (["--save-at", "-1"], ["--save-at -1 is before the start of the run"]),
+    (["--save-at", "1", "--dt", "-0.01"], ["--save-at 1 is before the start", "backwards: times must be <= 0"]),
+    (["--save-at", ","], ["--save-at", "names no times"]),
+    (["--save-at", "1,,2"], ["--save-at", "value 2", "is empty"]),
+    (["--save-at", "nan"], ["--save-at", "must be finite"]),
+    (["--save-at", "1,abc"], ["--save-at", "'abc' is not a number"]),
+    (["--save-at", "@missing.txt"], ["--save-at", "no such file 'missing.txt'"]),
+    (["--save-at", "@sub"], ["--save-at", "'sub' is not a regular file"]),
+    (["--save-at", "@/dev/zero"], ["--save-at", "'/dev/zero' is not a regular file"]),
+    (["--save-at", "@"], ["--save-at", "@ must be followed by a file name"]),
+    (["--save-at", "@bad-times.txt"], ["--save-at", "line 3 of 'bad-times.txt'", "'2,5' is not a number"]),
+    (["--save-at", "@empty-times.txt"], ["--save-at", "holds no times"]),
+    (["--save-at", "1e300"], ["--save-at 1e+300 / --dt 0.01", "steps, more than"]),
+    (["--save-at", "1,2", "--max-memory", "3K"], ["--max-memory", "saved states"]),
+    (["--noise", "1e-3", "--no-save"], ["--noise applies to the written trajectory", "--no-save"]),
+    (["--noise", "-1"], ["--noise", ">= 0"]),
+    (["--seed", "-3"], ["--seed", "'-3'"]),
+    (["--dtype", "float16"], ["--dtype", "invalid choice", "'float16'"]),
+    (["--reference", "elliptic"], ["--reference", "invalid choice"]),
+    (["--tol", "1e-8", "--scheme", "strang", "--dt", "0.1"], ["--tol chooses the scheme", "drop --scheme, --dt"]),
+    (["--tol", "0"], ["--tol", "positive"]),
+]
+CHECK_SYSTEMS = [
+    (["--system", "heavy-top", "--reference", "exact"], ["--reference exact", "use --reference numerical"]),
+    (["--system", "heavy-top", "--gamma0", "0,0,3"], ["--gamma0 0,0,3 has norm 3"]),
+    (["--system", "heavy-top", "--m0", "0,0,1", "--gamma0", "0,0,1", "--center-of-mass", "0,0,1"],
+     ["equilibrium of --system heavy-top", "no order can be measured"]),
+    (["--system", "attitude", "--split", "symmetric"], ["--split symmetric is not offered by --system attitude"]),
+]
+SWEEP_SYSTEMS = [
+    (["--system", "heavy-top"], ["--system heavy-top", "free-body cases", "jaxsplit.sweep"]),
+]
+
+
 def _setup(tmp_path):
     (tmp_path / "a-file").write_text("x")
+    (tmp_path / "bad-times.txt").write_text("0.5\n# a comment\n2,5\n")
+    (tmp_path / "empty-times.txt").write_text("# nothing\n\n")
     (tmp_path / "sub").mkdir()
     for name, file in (("old", "claims.json"), ("old-report", "report.md"), ("old-figure", "order2_ladder.png")):
         (tmp_path / name).mkdir()
         (tmp_path / name / file).write_text("precious")
 
 
-@pytest.mark.parametrize("command,argv,words", [("simulate", a, w) for a, w in SIMULATE]
-                         + [("sweep", a, w) for a, w in SWEEP] + [("check", a, w) for a, w in CHECK]
-                         + [("paper", a, w) for a, w in PAPER],
-                         ids=[f"{c}: {' '.join(a)[:60]}" for c, table in
-                              (("simulate", SIMULATE), ("sweep", SWEEP), ("check", CHECK), ("paper", PAPER))
-                              for a, _ in table])
+_TABLES = (("simulate", SIMULATE), ("sweep", SWEEP), ("check", CHECK), ("paper", PAPER), ("simulate", SYSTEMS),
+           ("check", CHECK_SYSTEMS), ("sweep", SWEEP_SYSTEMS))
+
+
+@pytest.mark.parametrize("command,argv,words", [(c, a, w) for c, table in _TABLES for a, w in table],
+                         ids=[f"{c}: {' '.join(a)[:60]}" for c, table in _TABLES for a, _ in table])
 def test_refused_with_one_line_naming_the_value(command, argv, words, capsys, tmp_path, monkeypatch):
     _setup(tmp_path)
     _refused([command, *argv], words, capsys, tmp_path, monkeypatch)
@@ -197,7 +260,43 @@ FIT_OPTIONS = [
     (["--scheme", "triple-jump-1000000"], ["triple-jump-1000000", "stages"]),
     (["--scheme", "nope"], ["unknown scheme 'nope'"]),
     (["--energy", "1", "--inertia1", "2"], ["one gauge"]),
+    (["--weight", "2"], ["--weight applies to a heavy-top fit"]),
+    (["--weight", "0"], ["--weight", "positive"]),
+    (["--system", "heavy-top"], ["--system heavy-top needs gamma (n, 3)"]),
+    (["--system", "attitude"], ["--system", "invalid choice"]),
 ]
+# The one data format read back: a CSV is parsed line by line, each fault named with its line.
+_HEADER = "# metadata: {}\n# t,m1,m2,m3\n"
+_ROWS = "".join(f"{t:.3f},{a:.6f},{b:.6f},{c:.6f}\n" for t, (a, b, c) in zip(_T, _MOVING))
+FIT_CSV = {
+    "no-header": ("0,1,2,3\n", ["line 1 must name the columns", "'0,1,2,3'"]),
+    "empty": ("", ["holds no column names"]),
+    "metadata-only": ("# metadata: {}\n", ["holds no column names"]),
+    "bad-metadata": ("# metadata: {oops\n# t,m1,m2,m3\n" + _ROWS, ["line 1 is not '# metadata: <JSON object>'"]),
+    "short-row": (_HEADER + _ROWS + "1.5,0.1,0.2\n", ["line 13 has 3 values", "names 4 columns"]),
+    "not-a-number": (_HEADER + _ROWS.replace("0.500000", "half", 1), ["line 3", "'half' is not a number"]),
+    "duplicate-column": ("t,m1,m1,m3\n" + _ROWS, ["distinct names"]),
+    "no-m": ("t,x1,x2,x3\n" + _ROWS, ["missing array(s) ['m']"]),
+    "nan": (_HEADER + _ROWS.replace("0.500000", "nan", 1), ["m must be finite", "1 NaN/inf"]),
+    "gamma-partial": ("t,m1,m2,m3,gamma1,gamma2\n" + "".join(r.strip() + ",0,1\n" for r in _ROWS.splitlines()),
+                      ["--system heavy-top needs gamma (n, 3)"]),
+    "binary": (b"\x00\xff\xfe garbage", ["not a readable .csv file", "UnicodeDecodeError"]),
+}
+
+
+@pytest.mark.parametrize("name", list(FIT_CSV))
+def test_fit_refuses_malformed_csv(name, capsys, tmp_path, monkeypatch):
+    content, words = FIT_CSV[name]
+    path = tmp_path / f"{name}.csv"
+    path.write_bytes(content if isinstance(content, bytes) else content.encode())
+    extra = ["--system", "heavy-top"] if name == "gamma-partial" else []
+    _refused(["fit", "--data", str(path), *extra], words, capsys, tmp_path, monkeypatch)
+
+
+def test_fit_refuses_a_fifo_before_opening_it(capsys, tmp_path, monkeypatch):
+    os.mkfifo(tmp_path / "obs.csv")  # opening it would block until a writer came
+    _refused(["fit", "--data", "obs.csv"], ["obs.csv is not a readable .csv file", "not a regular file"], capsys,
+             tmp_path, monkeypatch)
 
 
 @pytest.mark.parametrize("name", list(FIT_FILES))

@@ -85,7 +85,7 @@ def test_fit_interrupted_inside_xla_exits_130_without_crashing(zygote, tmp_path,
 
 
 def test_check_interrupted_inside_xla_exits_130(zygote, tmp_path):
-    run = zygote.run(["check", "--json"], tmp_path, trigger="during:jaxsplit.checks._order:global_errors:0.2",
+    run = zygote.run(["check", "--json"], tmp_path, trigger="during:jaxsplit.cli.check:_errors:0.2",
                      signal="SIGTERM")
     _interrupted(run, "SIGTERM")
     assert run.stdout == "" and list(tmp_path.iterdir()) == []

@@ -7,6 +7,7 @@ turns the ``ArgumentTypeError`` into "argument --x: <message>" (exit status 2).
 
 import argparse
 import math
+import os
 import re
 
 EXIT_CODES_HELP = (
@@ -61,6 +62,65 @@ def positive_list(name: str):
         return values
 
     return parse
+
+
+MAX_TIMES_FILE = 2**28  # bytes of a --save-at @file (read whole, one time per line)
+
+
+def times(option: str):
+    """argparse type: comma-separated finite times, or ``@file`` with one time per line (blank
+    lines and lines starting with # are skipped). The order and the range are checked against
+    the run later."""
+
+    def parse(text):
+        text = str(text)
+        if text.startswith("@"):
+            items = _times_file(text[1:], option)
+        else:
+            parts = [p.strip() for p in text.split(",")]
+            if all(p == "" for p in parts):
+                raise argparse.ArgumentTypeError(f"names no times (got {text!r}); give t1,t2,... or @FILE")
+            empty = [i + 1 for i, p in enumerate(parts) if p == ""]
+            if empty:
+                raise argparse.ArgumentTypeError(f"value {empty[0]} of {text[:60]!r} is empty")
+            items = [(None, p) for p in parts]
+        values = []
+        for line, item in items:
+            where = f"line {line} of {text[1:]!r}: " if line is not None else ""
+            try:
+                value = float(item)
+            except ValueError:
+                raise argparse.ArgumentTypeError(f"{where}{item[:40]!r} is not a number (a time)") from None
+            if not math.isfinite(value):
+                raise argparse.ArgumentTypeError(f"{where}times must be finite, got {item!r}")
+            values.append(value)
+        return tuple(values)
+
+    return parse
+
+
+def _times_file(path: str, option: str):
+    """[(line number, text)] of a times file, refused unless it is a readable regular file of
+    bounded size (a FIFO or a device would block or never end)."""
+    if path == "":
+        raise argparse.ArgumentTypeError("@ must be followed by a file name (@times.txt)")
+    if not os.path.exists(path):
+        raise argparse.ArgumentTypeError(f"no such file {path!r}")
+    if not os.path.isfile(path):
+        raise argparse.ArgumentTypeError(f"{path!r} is not a regular file")
+    size = os.path.getsize(path)
+    if size > MAX_TIMES_FILE:
+        raise argparse.ArgumentTypeError(f"{path!r} is {size:,} bytes, more than the {MAX_TIMES_FILE:,} allowed "
+                                         "(it is read whole)")
+    try:
+        with open(path, encoding="utf-8") as f:
+            lines = f.read().splitlines()
+    except (OSError, UnicodeDecodeError) as err:
+        raise argparse.ArgumentTypeError(f"cannot read {path!r} ({type(err).__name__})") from None
+    items = [(k + 1, line.strip()) for k, line in enumerate(lines) if line.strip() and not line.lstrip().startswith("#")]
+    if not items:
+        raise argparse.ArgumentTypeError(f"{path!r} holds no times (one time per line)")
+    return items
 
 
 def positive_int(text) -> int:

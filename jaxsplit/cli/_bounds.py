@@ -86,9 +86,13 @@ def memory(need: int, limit: int, what: str, hint: str) -> int:
     return need
 
 
-def saved_states(n_steps: int, save_every: int, bytes_per_saved: int, limit: int) -> int:
-    """Bytes of a run saving every ``save_every``-th state (and the first and last ones)."""
-    n_saved = n_steps // save_every + 2
+def saved_states(n_steps: int, save_every: int, bytes_per_saved: int, limit: int, extra: int = 0) -> int:
+    """Bytes of a run saving every ``save_every``-th state (and the first and last ones) and
+    ``extra`` states at requested times (``--save-at``)."""
+    n_saved = n_steps // save_every + 2 + extra
+    if extra and extra * bytes_per_saved > limit // 2:
+        return memory(n_saved * bytes_per_saved, limit, f"the trajectory ({n_saved:,} saved states, {extra:,} of them "
+                      "at --save-at times)", "give fewer --save-at times")
     suggest = max(save_every + 1, math.ceil(n_steps * bytes_per_saved / (0.5 * limit)))
     return memory(n_saved * bytes_per_saved, limit, f"the trajectory ({n_saved:,} saved states)",
                   f"save fewer states, e.g. --save-every {suggest}")

@@ -36,6 +36,8 @@ MANIFEST = "manifest.json"
 RESULTS = "results.npz"
 SUMMARY = "summary.json"
 CASES = "cases.npz"
+FIGURE = "sweep.png"
+RANDOM_BINS = 4  # random sampling: each parameter's range cut into this many log-spaced bins
 FORMAT_VERSION = 2  # 2: chunks carry a proof of their inputs, cases and results
 RUNS_DIR = "jaxsplit-runs"
 # Host memory per case while merging: inputs and outputs (~30 numbers), twice.
@@ -50,7 +52,9 @@ examples:
 
 outputs (in --out DIR, default a new directory in ./jaxsplit-runs/): manifest.json (the
 inputs), cases.npz, chunk-NNNNN.npz (one per finished chunk, written atomically),
-results.npz (all cases and results, with metadata) and summary.json. Per case:
+results.npz (all cases and results, with metadata), summary.json (with the tables grouped
+by inertia ratios and by step size that the summary prints) and sweep.png (the errors
+against h, one line per inertia ratio pair: median and max over the states). Per case:
 energy_error = max|H/H0 - 1| and casimir_error = max|C/C0 - 1| over every step, error =
 max|m_n - m_ref(t_end)| against a high-order reference (reference_accuracy bounds its own
 error), poisson_defect of one step at m0, the step size h actually used (t_end / n_steps)
@@ -103,8 +107,13 @@ def add_parser(sub):
                     "interrupted sweep resumes with --resume.",
         epilog=EXAMPLES + "\n" + EXIT_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     g = p.add_argument_group("method")
+    g.add_argument("--system", choices=("rigid-body", "attitude", "heavy-top", "gravity-gradient"),
+                   default="rigid-body", help="rigid-body only (default): the cases are free bodies (initial "
+                                              "states x inertia ratios x step sizes); other systems are refused "
+                                              "with the library call that sweeps them")
     g.add_argument("--scheme", default="strang", help="any name from `jaxsplit schemes` (default strang)")
-    g.add_argument("--split", choices=("axes", "casimir"), default="axes", help="(default axes)")
+    g.add_argument("--split", choices=("axes", "casimir"), default=None,
+                   help="(default axes, or casimir for a scheme of exactly two pieces)")
     g.add_argument("--shift-axis", choices=("auto", "1", "2", "3"), default=None,
                    help="axis of the Casimir shift, with --split casimir (default auto)")
     g.add_argument("--t-end", type=_args.positive_float, default=10.0, metavar="T",
@@ -136,6 +145,7 @@ def add_parser(sub):
     g.add_argument("--resume", action="store_true", help="continue the sweep in --out DIR")
     g.add_argument("--max-memory", type=_args.byte_size, metavar="SIZE",
                    help="refuse sweeps whose merged results need more (default: half the available memory)")
+    g.add_argument("--no-figure", action="store_true", help=f"do not draw {FIGURE}")
     _args.add_common_flags(p)
     p.set_defaults(func=run)
 
@@ -145,8 +155,14 @@ def add_parser(sub):
 
 def _inputs(args) -> dict:
     """Every input that determines the results (compared on --resume)."""
+    if args.system != "rigid-body":
+        raise InputError(f"--system {args.system}: the command-line sweep runs free-body cases (initial states x "
+                         "inertia ratios x step sizes); sweep other systems with the library, jaxsplit.sweep(scheme, "
+                         "cases, t_end=..., system=<a family params -> system>) (see its docstring)")
     s = _bounds.scheme(args.scheme)
     scheme = s.name
+    if args.split is None:  # a scheme of exactly two pieces, or a --shift-axis, asks for the Casimir split
+        args.split = "axes" if s.pieces_allowed(3) and args.shift_axis is None else "casimir"
     reference = _bounds.scheme(args.reference_scheme, "--reference-scheme").name
     if args.reference_angle > 0.5:
         raise InputError(f"--reference-angle must be <= 0.5, got {args.reference_angle:g}")
@@ -224,7 +240,7 @@ def _chunk_path(out: Path, k: int) -> Path:
 
 
 def _sweep_files(out: Path) -> list[Path]:
-    names = [MANIFEST, RESULTS, SUMMARY, CASES]
+    names = [MANIFEST, RESULTS, SUMMARY, CASES, FIGURE]
     return [p for p in [*(out / name for name in names), *sorted(out.glob("chunk-*.npz"))] if p.exists()]
 
 
@@ -403,6 +419,9 @@ def _run(args, outputs):
     with stop.critical():
         merged = _merge(outputs, out, cases, bounds, inputs, digest)
         summary = _summary(merged, inputs, n, n_chunks, computed, skipped, seconds, out)
+        if not args.no_figure:
+            _write_figure(outputs, out, merged, inputs)
+            summary["figure"] = str(out / FIGURE)
         outputs.write_json(out / SUMMARY, summary)
         if args.json:
             _metadata.print_json(summary)
@@ -442,8 +461,67 @@ def _summary(r, inputs, n, n_chunks, computed, skipped, seconds, out):
         "energy_error": _stats(r["energy_error"]), "casimir_error": _stats(r["casimir_error"]),
         "error": _stats(r["error"]), "poisson_defect": _stats(r["poisson_defect"]),
         "reference_accuracy_max": float(np.max(r["reference_accuracy"])),
+        "groups": _groups(r, inputs),
         "seconds": seconds, "out": str(out), "results": str(out / RESULTS),
     }
+
+
+# --------------------------------------------------------------------------- tables and figure
+METRICS = ("error", "energy_error", "casimir_error")
+
+
+def _group_keys(r, inputs) -> dict:
+    """{parameter: (label per case (N,), the labels in order)}: the swept parameters, exact
+    groups for a grid, log-spaced bins of each parameter for random samples."""
+    ratio = np.stack([r["case_inertia"][:, 1], r["case_inertia"][:, 2]], axis=1)
+    h = np.asarray(r["case_h"], dtype=float)
+    if inputs["sampling"] == "grid":
+        by_ratio = np.array([f"I2/I1={a:g}, I3/I1={b:g}" for a, b in ratio])
+        by_h = np.array([f"h={x:g}" for x in h])
+        return {"inertia ratios": (by_ratio, list(dict.fromkeys(by_ratio))), "step size": (by_h, list(dict.fromkeys(
+            by_h[np.argsort(-h, kind="stable")])))}
+    out = {}
+    for name, values in (("I2/I1", ratio[:, 0]), ("I3/I1", ratio[:, 1]), ("h", h)):
+        edges = np.geomspace(values.min(), values.max() * (1 + 1e-12), RANDOM_BINS + 1)
+        k = np.clip(np.searchsorted(edges, values, side="right") - 1, 0, RANDOM_BINS - 1)
+        labels = np.array([f"{name} in [{edges[i]:.3g}, {edges[i + 1]:.3g})" for i in k])
+        order = [f"{name} in [{edges[i]:.3g}, {edges[i + 1]:.3g})" for i in range(RANDOM_BINS)]
+        out[name] = (labels, [o for o in order if o in set(labels)])
+    return out
+
+
+def _groups(r, inputs) -> dict:
+    """{parameter: [row per group: cases, median and max of each metric]}."""
+    tables = {}
+    for parameter, (labels, order) in _group_keys(r, inputs).items():
+        rows = []
+        for label in order:
+            sel = labels == label
+            row = {"group": label, "cases": int(sel.sum())}
+            for key in METRICS:
+                v = np.asarray(r[key], dtype=float)[sel]
+                row |= {f"{key}_median": float(np.median(v)), f"{key}_max": float(np.max(v))}
+            rows.append(row)
+        tables[parameter] = rows
+    return tables
+
+
+def _write_figure(outputs, out, r, inputs):
+    from . import _figures
+
+    keys = _group_keys(r, inputs)
+    group, order = keys["inertia ratios"] if "inertia ratios" in keys else keys["I3/I1"]
+    if inputs["sampling"] == "grid":
+        h = np.asarray(inputs["dt"], dtype=float)[np.asarray(r["case_h_index"])]
+    else:  # the centre of each case's h bin (geometric)
+        edges = np.geomspace(np.min(r["case_h"]), np.max(r["case_h"]) * (1 + 1e-12), RANDOM_BINS + 1)
+        k = np.clip(np.searchsorted(edges, r["case_h"], side="right") - 1, 0, RANDOM_BINS - 1)
+        h = np.sqrt(edges[k] * edges[k + 1])
+    table = {"h": h, "group": group} | {key: np.asarray(r[key]) for key in METRICS}
+    title = (f"sweep: {inputs['scheme']} ({inputs['split']} split), {len(h):,} cases to t = {inputs['t_end']:g}, "
+             f"{inputs['sampling']} sampling" + (" (h: bin centres)" if inputs["sampling"] == "random" else ""))
+    fig = _figures.sweep_figure(table, title=title, order=order)
+    outputs.write(out / FIGURE, lambda f: _figures.save_figure(fig, f))
 
 
 def _print_summary(s):
@@ -455,4 +533,10 @@ def _print_summary(s):
         st = s[key]
         print(f"  {label:<20} median {st['median']:.3e}   max {st['max']:.3e}")
     print(f"  reference accuracy   max {s['reference_accuracy_max']:.1e}")
-    print(f"  wrote {s['results']} and {Path(s['out']) / SUMMARY}")
+    for parameter, rows in s["groups"].items():
+        width = max(len(row["group"]) for row in rows)
+        print(f"  {'by ' + parameter:<{width + 2}}  {'cases':>5}   error median / max      energy error median / max")
+        for row in rows:
+            print(f"    {row['group']:<{width}}  {row['cases']:>5}   {row['error_median']:.2e} / {row['error_max']:.2e}"
+                  f"     {row['energy_error_median']:.2e} / {row['energy_error_max']:.2e}")
+    print(f"  wrote {s['results']}, {Path(s['out']) / SUMMARY}" + (f" and {s['figure']}" if s.get("figure") else ""))
