@@ -33,7 +33,7 @@ import numpy as np
 from ._adjoints import advance, advance_checkpointed, check_adjoint
 from ._compose import Composition
 from ._errors import InputError
-from ._flows import join_parameters, split_parameters  # noqa: F401  (re-exported)
+from ._flows import join_parameters, split_parameters
 from ._state import as_state, float_dtype
 
 
