@@ -83,6 +83,8 @@ from .explore._tune import order4_coefficients as order4_coefficients
 from .explore._tune import random_bodies as random_bodies
 from .explore._tune import tune_scheme as tune_scheme
 from .paper import audit_paper as audit_paper
+from .systems._auto import AutoSplitting as AutoSplitting
+from .systems._auto import auto_splitting as auto_splitting
 from .systems._base import AbstractSystem as AbstractSystem
 from .systems._hamilton_poisson import HamiltonPoisson as HamiltonPoisson
 from .systems._hamilton_poisson import canonical_system as canonical_system

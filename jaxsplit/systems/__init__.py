@@ -3,11 +3,14 @@ solvable pieces, built from the so(3) toolkit (``so3``).
 
 Modules: ``_base`` (``AbstractSystem``, the protocol a user's own system implements),
 ``_rigid_body`` (the free body), ``_hamilton_poisson`` (a system from two functions: the
-paper's §2–3 examples), ``_splitting`` (``splitting``: system + scheme -> step), ``so3``
+paper's §2–3 examples), ``_splitting`` (``splitting``: system + scheme -> step), ``_auto`` (``auto_splitting``: the
+cheapest scheme, split and step for a tolerance), ``so3``
 (rotations, quaternions, rotation flows that turn declared parts of a state).
 """
 
 from . import so3 as so3
+from ._auto import AutoSplitting as AutoSplitting
+from ._auto import auto_splitting as auto_splitting
 from ._base import AbstractSystem as AbstractSystem
 from ._hamilton_poisson import HamiltonPoisson as HamiltonPoisson
 from ._rigid_body import STANDARD_CASE as STANDARD_CASE
