@@ -19,6 +19,15 @@ import jaxsplit
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
+# How tables and plots name the registry's schemes: author, order (the registry's names are kebab-case keys).
+SCHEME_LABELS = {"strang": "Strang (order 2)", "blanes-moan-s6-prk": "Blanes–Moan S6 partitioned (order 4)",
+                 "kahan-li-6": "Kahan–Li (order 6)", "kahan-li-8": "Kahan–Li (order 8)",
+                 "kahan-li-10": "Kahan–Li (order 10)", "sofroniou-spaletta-10": "Sofroniou–Spaletta (order 10)"}
+
+
+def scheme_label(name: str) -> str:
+    return SCHEME_LABELS.get(name, name)
+
 
 def log(msg: str):
     print(f"[{time.strftime('%H:%M:%S')}] {msg}", file=sys.stderr, flush=True)

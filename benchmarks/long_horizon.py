@@ -27,7 +27,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
-from _common import RESULTS, header, interleaved, log, machine_info, write
+from _common import RESULTS, header, interleaved, log, machine_info, scheme_label, write
 
 import jaxsplit
 
@@ -81,7 +81,7 @@ def main(argv=None):
         rk()
         times = interleaved({"split": split, "rk": rk}, repeats)
         log(f"{scheme} vs {rk_name}: {n} RK steps (h = {t_end / n:.3g})")
-        for name, fn, label in ((scheme, split, f"jaxsplit {scheme} (casimir), h = {h}"),
+        for name, fn, label in ((scheme, split, f"jaxsplit {scheme_label(scheme)}, Casimir split, h = {h}"),
                                 (rk_name, rk, f"diffrax {rk_name}, fixed h = {t_end / n:.3g} (same time)")):
             de, dc = errors(fn())
             key = "split" if name == scheme else "rk"

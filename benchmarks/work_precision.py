@@ -31,7 +31,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
-from _common import RESULTS, header, interleaved, log, machine_info, time_to_reach, write
+from _common import RESULTS, header, interleaved, log, machine_info, scheme_label, time_to_reach, write
 from scipy.integrate import solve_ivp
 
 import jaxsplit
@@ -60,7 +60,7 @@ def jaxsplit_cases(body, m0, quick):
         step = jaxsplit.splitting(body, scheme, "casimir")
         for per_unit in counts[::2] if quick else counts:
             n = per_unit * round(T_END / 1000)
-            cases.append((f"jaxsplit {scheme} (casimir)", f"n = {n}",
+            cases.append((f"jaxsplit {scheme_label(scheme)}, Casimir split", f"n = {n}",
                           lambda step=step, n=n: jaxsplit.integrate(step, m0, T_END / n, n).final.block_until_ready()))
     return cases
 
@@ -200,7 +200,7 @@ def main(argv=None):
               "tolerance, apart):", "", "| body | tol | choice | steps | error reached | run | pilot |",
               "|---|---|---|---|---|---|---|"]
     for a in auto:
-        lines.append(f"| {a['body']} | {a['tol']:.0e} | {a['scheme']} ({a['split']}) | {a['n_steps']} | "
+        lines.append(f"| {a['body']} | {a['tol']:.0e} | {scheme_label(a['scheme'])}, {a['split']} split | {a['n_steps']} | "
                      f"{a['error']:.2e} | {a['time_s'] * 1e3:.3g} ms | {a['pilot_s']:.2g} s |")
     out["wall_s"] = time.perf_counter() - start
     lines += ["", f"Total wall time {out['wall_s']:.0f} s."]
