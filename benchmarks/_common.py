@@ -94,9 +94,9 @@ def machine_info(command: str) -> dict:
 
 
 def header(out: dict, title: str) -> list[str]:
-    return [f"## {title}", "", f"`{out['command']}` — {out['date_utc']}; {out['machine']}; load average at start "
+    return [f"## {title}", "", (f"`{out['command']}` — {out['date_utc']}; {out['machine']}; load average at start "
             f"{', '.join(f'{v:.1f}' for v in out['load_average_at_start'])}; JAX {out['versions']['jax']}; "
-            f"jaxsplit at {out['git']}.", ""]
+            f"jaxsplit at {out['git']}."), ""]
 
 
 def write(stem: str, quick: bool, out: dict, lines: list[str]):

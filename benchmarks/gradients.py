@@ -192,7 +192,8 @@ def fit_timing(repeats):
     cases, compile_s, grads = {}, {}, {}
     for variant in FIT_VARIANTS:
         predict = fit_model(variant)
-        fn = jax.jit(jax.value_and_grad(lambda li, m: jnp.mean((predict(li, m, dts) - observed) ** 2), argnums=(0, 1)))
+        fn = jax.jit(jax.value_and_grad(lambda li, m, predict=predict: jnp.mean((predict(li, m, dts) - observed) ** 2),
+                                        argnums=(0, 1)))
         t0 = time.perf_counter()
         fn.lower(log_inertia, m0).compile()
         compile_s[variant] = time.perf_counter() - t0
@@ -225,10 +226,10 @@ def main(argv=None):
     out.update(rows=rows, time_vs_forward=ratios, fit=fit_rows)
 
     lines = header(out, "Gradients through n steps (`benchmarks/gradients.py`)")
-    lines += ["XLA temporary memory of the compiled gradient (MiB); where run, the largest gradient entry and the "
-              "largest relative difference from the stored-trajectory gradient.", "",
-              "| system | steps | store | checkpoint | reversible | max gradient | checkpoint vs store | "
-              "reversible vs store |", "|---|---|---|---|---|---|---|---|"]
+    lines += [("XLA temporary memory of the compiled gradient (MiB); where run, the largest gradient entry and the "
+              "largest relative difference from the stored-trajectory gradient."), "",
+              ("| system | steps | store | checkpoint | reversible | max gradient | checkpoint vs store | "
+              "reversible vs store |"), "|---|---|---|---|---|---|---|---|"]
     for r in rows:
         mib = [f"{r[f'{a}_temp_bytes'] / 2**20:.3g}" for a in ADJOINTS]
         extra = [f"{r[k]:.1e}" if k in r else "—" for k in ("largest_gradient", "checkpoint_vs_store",
@@ -239,8 +240,8 @@ def main(argv=None):
     for r in ratios:
         lines.append(f"| {r['system']} | {r['n_steps']:,} | {r['forward_s'] * 1e3:.3g} ms | "
                      + " | ".join(f"{r[a]:.2f}×" for a in ADJOINTS) + " |")
-    lines += ["", "fit's loss gradient (free body, 200 intervals × 2 Kahan–Li 6 steps, gradient with respect to "
-              "log I and m0):", "", "| model | per gradient | × fit today | compile | vs fit today |",
+    lines += ["", ("fit's loss gradient (free body, 200 intervals × 2 Kahan–Li 6 steps, gradient with respect to "
+              "log I and m0):"), "", "| model | per gradient | × fit today | compile | vs fit today |",
               "|---|---|---|---|---|"]
     for r in fit_rows:
         lines.append(f"| {r['variant']} | {r['gradient_s'] * 1e3:.3g} ms | {r['time_vs_fit_today']:.2f} | "

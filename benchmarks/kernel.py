@@ -125,11 +125,11 @@ def main(argv=None):
                              "ns_per_rotation": ns, "time_vs_general": ratio, **accuracy(cs, limit, dtype)})
     out["rows"] = rows
     lines = header(out, "Rotation kernels (`benchmarks/kernel.py`)")
-    lines += ["Time per rotation inside a Strang run (median of interleaved rounds) and its ratio to the general "
+    lines += [("Time per rotation inside a Strang run (median of interleaved rounds) and its ratio to the general "
               "kernel in the same round; accuracy over |θ| <= L (general: over |θ| <= 1) in units of the dtype's "
-              "eps.", "",
-              "| dtype | layout | kernel | polynomial terms | ns / rotation | × general | cos error | sin error "
-              "| cos²+sin²−1 |", "|---|---|---|---|---|---|---|---|---|"]
+              "eps."), "",
+              ("| dtype | layout | kernel | polynomial terms | ns / rotation | × general | cos error | sin error "
+              "| cos²+sin²−1 |"), "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['dtype']} | {r['layout']} | {r['kernel']} | {r['terms'] or '—'} | {r['ns_per_rotation']:.3g} "
                      f"| {r['time_vs_general']:.2f} | {r['cos_ulps']:.2f} | {r['sin_ulps']:.2f} | "

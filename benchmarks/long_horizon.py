@@ -105,11 +105,11 @@ def main(argv=None):
     fig.savefig(RESULTS / f"long_horizon{'-quick' if quick else ''}.png", dpi=110)
     out["rows"] = rows
     lines = header(out, f"Long horizon, T = {t_end:g} (`benchmarks/long_horizon.py`)")
-    lines += ["Each Runge–Kutta run is given the wall time of the splitting it faces (fixed step calibrated, then "
+    lines += [("Each Runge–Kutta run is given the wall time of the splitting it faces (fixed step calibrated, then "
               "measured; median of interleaved rounds). Relative errors at the 101 saved times. Plot: "
-              "`long_horizon.png`.", "",
-              "| method | wall time | × splitting's time | max energy error | energy error at T/10 | at T | "
-              "max Casimir error |", "|---|---|---|---|---|---|---|"]
+              "`long_horizon.png`."), "",
+              ("| method | wall time | × splitting's time | max energy error | energy error at T/10 | at T | "
+              "max Casimir error |"), "|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['method']} | {r['time_s']:.3g} s | {r['time_vs_splitting']:.2f} | "
                      f"{r['max_energy_error']:.2e} | {r['energy_error_at_T/10']:.2e} | {r['final_energy_error']:.2e} | "

@@ -123,9 +123,9 @@ def main(argv=None):
                          "speedup_vs_numpy": paired_ratio(per, "NumPy, vectorised loop", name)})
     out["rows"] = rows
     lines = header(out, "Batch throughput (`benchmarks/throughput.py`)")
-    lines += ["Strang, Casimir split (2 rotations per step), float64, h = 0.01. Million body-steps per second "
+    lines += [("Strang, Casimir split (2 rotations per step), float64, h = 0.01. Million body-steps per second "
               "(median of interleaved rounds) and, in brackets, the speed-up over the NumPy loop (median of the "
-              "per-round ratios).", "",
+              "per-round ratios)."), "",
               "| method | " + " | ".join(f"B = {b:,}" for b in BATCHES) + " |", "|---|" + "---|" * len(BATCHES)]
     for name in dict.fromkeys(r["method"] for r in rows):
         cells = [next(f"{r['body_steps_per_s'] / 1e6:.3g} ({r['speedup_vs_numpy']:.2g}×)" for r in rows

@@ -124,7 +124,7 @@ def study(label, inertia, quick, repeats):
         t0 = time.perf_counter()
         choice = jaxsplit.auto_splitting(body, m0, tol=tol, t_end=T_END)
         pilot = time.perf_counter() - t0
-        run = lambda choice=choice: jaxsplit.integrate(choice.step, m0, choice.h, choice.n_steps).final.block_until_ready()  # noqa: E731
+        run = lambda choice=choice: jaxsplit.integrate(choice.step, m0, choice.h, choice.n_steps).final.block_until_ready()
         result = np.asarray(run())
         run_s = statistics.median(interleaved({"run": run}, repeats)["run"])
         auto.append({"body": label, "tol": tol, "scheme": choice.scheme, "split": choice.split,
@@ -179,10 +179,10 @@ def main(argv=None):
         auto += a
     out["rows"], out["auto"] = rows, auto
     lines = header(out, "Work–precision at T = 10³, 256 bodies (`benchmarks/work_precision.py`)")
-    lines += ["Time to reach a max error over the bodies (log-log interpolation between measured points; — = "
+    lines += [("Time to reach a max error over the bodies (log-log interpolation between measured points; — = "
               "not bracketed) for the best configuration of each family, and the speed-up of the best jaxsplit "
               "configuration over the best diffrax one. Plot: `work_precision.png`; every point in "
-              "`work_precision.json`.", "",
+              "`work_precision.json`."), "",
               "| body | error | best jaxsplit | best diffrax | scipy DOP853 | jaxsplit speed-up over diffrax |",
               "|---|---|---|---|---|---|"]
     out["speedups"] = {}
@@ -192,12 +192,12 @@ def main(argv=None):
             (tj, mj), (td, md), (ts, _) = best["jaxsplit", t], best["diffrax", t], best["scipy", t]
             ratio = td / tj if tj and td else None
             out["speedups"][f"{label}, {t:.0e}"] = ratio
-            cell = lambda v, m: "—" if v is None else f"{v * 1e3:.3g} ms ({m})"  # noqa: E731
+            cell = lambda v, m: "—" if v is None else f"{v * 1e3:.3g} ms ({m})"
             lines.append(f"| {label} | {t:.0e} | {cell(tj, mj)} | {cell(td, md)} | "
                          f"{'—' if ts is None else f'{ts * 1e3:.3g} ms'} | "
                          f"{'—' if ratio is None else f'**{ratio:.2g}×**'} |")
-    lines += ["", "`auto_splitting`'s choice per tolerance (run time; the pilot that chose it, once per body and "
-              "tolerance, apart):", "", "| body | tol | choice | steps | error reached | run | pilot |",
+    lines += ["", ("`auto_splitting`'s choice per tolerance (run time; the pilot that chose it, once per body and "
+              "tolerance, apart):"), "", "| body | tol | choice | steps | error reached | run | pilot |",
               "|---|---|---|---|---|---|---|"]
     for a in auto:
         lines.append(f"| {a['body']} | {a['tol']:.0e} | {scheme_label(a['scheme'])}, {a['split']} split | {a['n_steps']} | "
