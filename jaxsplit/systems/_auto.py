@@ -4,8 +4,8 @@ Cost model (measured, ``benchmarks/kernel.py``): a run costs its rotations, n_st
 ``flows_per_step``, weighted by the kernel the run gets (the polynomial one where the angle
 bound allows the step size; the general one, ``GENERAL_COST`` times dearer, beyond). Error model: for each
 candidate (scheme, split) a pilot run over a short horizon T_p measures the global error
-e(h) against a tight reference at a ladder of step sizes (one compilation per candidate,
-``checks.global_errors``); in the asymptotic window the error constant
+e(h) against a tight reference at a ladder of step sizes (each step size run for its own
+count, h traced: one compilation per split); in the asymptotic window the error constant
 C = max e(h) / (h^p T_p) (p the scheme's order) and the global error is modelled as growing
 linearly in time (a phase error, as splittings of integrable motions show), e(h, T) ≈ C h^p T.
 The step for ``tol`` at ``t_end`` is h = (tol / (C t_end))^(1/p), never beyond the pilot's
@@ -20,7 +20,6 @@ from typing import NamedTuple
 import jax.numpy as jnp
 import numpy as np
 
-from ..checks._order import global_errors
 from ..core._compose import compose, roll
 from ..core._errors import InputError
 from ..core._integrate import integrate
@@ -94,7 +93,7 @@ def auto_splitting(system: AbstractSystem, x0, *, tol: float, t_end: float, cand
         for name, step in steps.items():
             scheme = step.scheme
             # rolled to one length: every candidate of this split shares one compilation
-            hs, errors = global_errors(roll(step, length), x0, pilot_time, counts, reference)
+            hs, errors = _pilot_errors(roll(step, length), x0, pilot_time, counts, reference)
             rows.append(_candidate(step, scheme, split, options, hs, errors, pilot_time, tol, t_end, x0,
                                    (WINDOW[0] * eps * scale, WINDOW[1] * scale)))
     if not rows:
@@ -127,6 +126,15 @@ def _reference(system, x0, t, rate):
     step = compose(system.split(name, **options), "kahan-li-10")
     n = max(1, math.ceil(t * rate / 0.01))
     return integrate(step, x0, t / n, n).final
+
+
+def _pilot_errors(step, x0, t, counts, reference):
+    """(step sizes, max-norm errors at ``t``) for each step count: each run for its own count
+    (the output time ``t`` with h traced, so one compilation serves every count)."""
+    exact = ravel(reference)[0]
+    hs = t / np.asarray(counts, dtype=float)
+    errors = [float(jnp.max(jnp.abs(ravel(integrate(step, x0, float(h), ts=[t]).final)[0] - exact))) for h in hs]
+    return hs, np.asarray(errors)
 
 
 def _candidate(step, scheme, split, options, hs, errors, pilot_time, tol, t_end, x0, window):
