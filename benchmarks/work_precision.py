@@ -39,8 +39,9 @@ import jaxsplit
 T_END = 1000.0
 BODIES = {"standard I = (2, 1, 2/3)": (2.0, 1.0, 2.0 / 3.0), "near-symmetric I = (1, 1.01, 0.5)": (1.0, 1.01, 0.5)}
 TARGETS = (1e-6, 1e-8)
-SPLITTINGS = {"kahan-li-8": (40, 80, 160, 320, 640), "kahan-li-6": (80, 160, 320, 640, 1280),
-              "blanes-moan-s6-prk": (160, 320, 640, 1280, 2560), "strang": (2000, 8000, 32000)}
+SPLITTINGS = {  # step counts over T = 10³ (h = 10³/n), bracketing 1e-6 and 1e-8 on both bodies
+    "kahan-li-8": (640, 1250, 2500, 5000, 10000), "kahan-li-6": (1280, 2500, 5000, 10000, 20000),
+    "blanes-moan-s6-prk": (2560, 5000, 10000, 20000, 40000, 80000), "strang": (16000, 64000, 256000)}
 
 
 def states():
@@ -58,8 +59,7 @@ def jaxsplit_cases(body, m0, quick):
     cases = []
     for scheme, counts in SPLITTINGS.items():
         step = jaxsplit.splitting(body, scheme, "casimir")
-        for per_unit in counts[::2] if quick else counts:
-            n = per_unit * round(T_END / 1000)
+        for n in counts[::2] if quick else counts:
             cases.append((f"jaxsplit {scheme_label(scheme)}, Casimir split", f"n = {n}",
                           lambda step=step, n=n: jaxsplit.integrate(step, m0, T_END / n, n).final.block_until_ready()))
     return cases
@@ -171,7 +171,7 @@ def main(argv=None):
     command = "python benchmarks/work_precision.py" + (" --quick" if quick else "")
     out = machine_info(command)
     start = time.perf_counter()
-    repeats = 2 if quick else 3
+    repeats = 2 if quick else 5
     rows, auto = [], []
     for label, inertia in BODIES.items():
         r, a = study(label, inertia, quick, repeats)
