@@ -9,9 +9,9 @@ import pytest
 import jaxsplit
 from jaxsplit.systems import so3
 
-KERNEL_ULPS = 2  # polynomial cos, sin vs XLA's on |θ| <= POLYNOMIAL_LIMIT, in units of eps
+KERNEL_ULPS = 2  # polynomial cos, sin vs NumPy's on |θ| <= each limit, in units of eps
 UNIT_CIRCLE_ULPS = 4  # cos² + sin² − 1
-BEYOND_LIMIT_ERROR = 1e-9  # what the polynomial is off by at 3× its limit: the limit matters
+BEYOND_LIMIT_ULPS = 100  # cos² + sin² − 1 at 3× the limit exceeds this (float64): the limit matters
 CASIMIR_TOL = 1e-12  # relative, 1e5 steps
 PATHS_AGREE = 1e-8  # polynomial vs general kernel after 1e5 steps (round-off grows apart)
 ROUNDOFF = 1e-13
@@ -20,21 +20,21 @@ STANDARD = jaxsplit.RigidBody(jnp.asarray(jaxsplit.STANDARD_CASE.inertia))
 M0 = jnp.asarray(jaxsplit.STANDARD_CASE.m0)
 
 
+@pytest.mark.parametrize("limit", so3.POLYNOMIAL_LIMITS)
 @pytest.mark.parametrize("dtype", [jnp.float64, jnp.float32])
-def test_polynomial_kernel_is_accurate_to_round_off_within_its_limit(dtype):
-    limit = so3.POLYNOMIAL_LIMIT
+def test_polynomial_kernel_is_accurate_to_round_off_within_its_limit(dtype, limit):
     theta = jnp.linspace(-limit, limit, 20001, dtype=dtype)
-    c, s = (np.asarray(a, np.float64) for a in so3.cos_sin(theta, "polynomial"))
+    c, s = (np.asarray(a, np.float64) for a in so3.cos_sin(theta, "polynomial", limit))
     exact = np.asarray(theta, np.float64)
     eps = float(jnp.finfo(dtype).eps)
-    assert c.dtype == s.dtype and so3.cos_sin(theta, "polynomial")[0].dtype == dtype
+    assert c.dtype == s.dtype and so3.cos_sin(theta, "polynomial", limit)[0].dtype == dtype
     assert np.max(np.abs(c - np.cos(exact))) <= KERNEL_ULPS * eps
     assert np.max(np.abs(s - np.sin(exact))) <= KERNEL_ULPS * eps
     assert np.max(np.abs(c * c + s * s - 1)) <= UNIT_CIRCLE_ULPS * eps
     # must fail: beyond its limit the truncated series is no longer a rotation to round-off
     far = jnp.asarray([3 * limit], dtype=jnp.float64)
-    cf, sf = so3.cos_sin(far, "polynomial")
-    assert abs(float(cf[0] ** 2 + sf[0] ** 2) - 1) > BEYOND_LIMIT_ERROR
+    cf, sf = so3.cos_sin(far, "polynomial", limit)
+    assert abs(float(cf[0] ** 2 + sf[0] ** 2) - 1) > BEYOND_LIMIT_ULPS * float(jnp.finfo(jnp.float64).eps)
 
 
 def test_the_run_picks_the_kernel_from_the_casimir_bound():
@@ -43,6 +43,14 @@ def test_the_run_picks_the_kernel_from_the_casimir_bound():
     fast = step.for_run(M0, 0.1)  # |c| |m0| reach h = 0.5 · 1 · 0.8 · 0.1
     assert fast.kernel == "polynomial" and "kernel='polynomial'" in repr(fast)
     assert step.for_run(M0, 10.0).kernel == "general"  # angles up to ~4 rad: the general path
+    # the truncation covers the run's bound, and smaller steps get fewer terms
+    m_norm = float(jnp.linalg.norm(M0))
+    for h in (0.01, 0.1, 1.0):
+        run = step.for_run(M0, h)
+        for flow, reach in zip(run.flows, step.reach()):
+            assert flow.angle_limit >= abs(float(flow.rate)) * m_norm * reach * h
+    terms = [len(so3._taylor("float64", step.for_run(M0, h).flows[0].angle_limit)[0]) for h in (0.01, 1.0)]
+    assert terms[0] < terms[1]
     assert jaxsplit.integrate(step, M0, 0.1, 10).kernel == "polynomial"
     assert jaxsplit.integrate(step, M0, 10.0, 10).kernel == "general"
     # under the caller's jit the values are traced: the general path (specialise beforehand
@@ -99,6 +107,8 @@ def test_a_batch_runs_components_first_and_matches_single_states():
     np.testing.assert_allclose(fast(states, 0.05), step(states, 0.05), atol=ROUNDOFF)
 
 
-def test_a_bad_kernel_name_is_refused():
+def test_a_bad_kernel_name_or_limit_is_refused():
     with pytest.raises(jaxsplit.InputError, match="kernel must be one of"):
         jaxsplit.AxisRotation(0, 1.0, kernel="fast")
+    with pytest.raises(jaxsplit.InputError, match="angle_limit must be one of"):
+        jaxsplit.AxisRotation(0, 1.0, kernel="polynomial", angle_limit=2.0)

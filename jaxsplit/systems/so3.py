@@ -27,11 +27,13 @@ Rotations act on the last axis and broadcast over leading axes: ``x[..., k]``.
 The kernel (``cos_sin``). XLA's ``sin`` and ``cos`` reduce the angle's range and are
 evaluated separately: they dominate the cost of a rotation. A rotation's angle is bounded in
 advance whenever every flow of a step rotates m (then |m| is conserved, so
-|θ| <= |c|·|m0|·|t| for every sub-step t of the run): for |θ| <= ``POLYNOMIAL_LIMIT`` the
-``"polynomial"`` kernel evaluates the Taylor polynomials of cos and sin in the shared θ²,
-with no range reduction, truncated where the next term is below a quarter of the dtype's
+|θ| <= |c|·|m0|·|t| for every sub-step t of the run): for |θ| <= L the ``"polynomial"``
+kernel evaluates the Taylor polynomials of cos and sin in the shared θ², with no range
+reduction, truncated where the next term at |θ| = L is below a quarter of the dtype's
 epsilon (accurate to round-off: measured ≤ 0.5 ulp, cos² + sin² − 1 ≤ 2 ulp, in
-``tests/test_kernel.py``). The map is the same exact rotation; only its trigonometry is
+``tests/test_kernel.py``). The smaller the bound, the fewer the terms (float64: 11 terms
+for L = 1/8, 19 for L = 1), so L is the smallest of ``POLYNOMIAL_LIMITS`` above the run's
+bound (``angle_limit``). The map is the same exact rotation; only its trigonometry is
 evaluated differently. ``for_run`` selects the kernel once per run from the initial state
 (``Composition.for_run``, called by ``integrate``); the ``"general"`` kernel is used
 otherwise. For a batch of free-body states a run also moves the components first
@@ -67,7 +69,10 @@ def hat(v):
 
 
 KERNELS = ("general", "polynomial")
-POLYNOMIAL_LIMIT = 1.0  # |θ| (rad) up to which the polynomial kernel is used; see benchmarks/kernel.py
+# |θ| (rad) bounds with their own truncation; the largest is where the polynomial kernel stops
+# being cheaper than XLA's cos and sin for one state (benchmarks/kernel.py)
+POLYNOMIAL_LIMITS = (0.125, 0.25, 0.5, 1.0)
+POLYNOMIAL_LIMIT = POLYNOMIAL_LIMITS[-1]
 
 
 @functools.cache
@@ -93,16 +98,16 @@ def _horner(coefficients, x):
     return acc
 
 
-def cos_sin(angle, kernel: str = "general"):
+def cos_sin(angle, kernel: str = "general", limit: float = POLYNOMIAL_LIMIT):
     """(cos θ, sin θ): the one place every rotation evaluates its trigonometry.
 
-    ``kernel="general"``: XLA's cos and sin (any angle). ``"polynomial"``: for
-    |θ| <= ``POLYNOMIAL_LIMIT`` only (the caller guarantees it), Taylor polynomials in the
-    shared θ², accurate to round-off there (see the module docstring).
+    ``kernel="general"``: XLA's cos and sin (any angle). ``"polynomial"``: for |θ| <= ``limit``
+    only (the caller guarantees it), Taylor polynomials in the shared θ² truncated for that
+    bound, accurate to round-off there (see the module docstring).
     """
     if kernel == "polynomial":
         angle = jnp.asarray(angle)
-        cos_c, sin_c = _taylor(np.dtype(angle.dtype).name)
+        cos_c, sin_c = _taylor(np.dtype(angle.dtype).name, float(limit))
         square = angle * angle
         return _horner(cos_c, square), angle * _horner(sin_c, square)
     return jnp.cos(angle), jnp.sin(angle)
@@ -256,11 +261,13 @@ class AbstractRotation(AbstractFlow):
     """A flow that turns m (and the declared parts) by an exact rotation whose angle is
     rate·(a component of m)·t: |m| is conserved, so a step made only of such flows bounds
     every angle of a run in advance (``for_run``). Subclasses declare the static fields
-    ``kernel`` (see ``cos_sin``) and ``components_first``."""
+    ``kernel`` and ``angle_limit`` (see ``cos_sin``) and ``components_first``."""
 
     def __check_init__(self):
         if self.kernel not in KERNELS:
             raise InputError(f"kernel must be one of {KERNELS}, got {self.kernel!r}")
+        if self.angle_limit not in POLYNOMIAL_LIMITS:
+            raise InputError(f"angle_limit must be one of {POLYNOMIAL_LIMITS}, got {self.angle_limit!r}")
 
     def _momentum(self, state):
         if self.components_first:
@@ -272,16 +279,19 @@ class AbstractRotation(AbstractFlow):
     def for_run(self, x0, t, step):
         """This rotation with the fastest kernel for one run of ``step`` from ``x0`` with
         sub-steps |s| <= ``t`` (concrete values): ``"polynomial"`` where every flow of ``step``
-        rotates the same parts (|m| is conserved) and |rate|·max|m0|·t <= POLYNOMIAL_LIMIT,
-        else ``"general"``; a batch of bare m states also gets its components first."""
+        rotates the same parts (|m| is conserved) and the bound |rate|·max|m0|·t is at most
+        ``POLYNOMIAL_LIMIT``, truncated for the smallest of ``POLYNOMIAL_LIMITS`` above the
+        bound (``angle_limit``); else ``"general"``. A batch of bare m states also gets its
+        components first."""
         flows = getattr(step, "flows", (self,))
         rotations = all(isinstance(f, AbstractRotation) and f.parts == self.parts for f in flows)
         m = _momentum_or_none(x0, self.parts) if rotations else None
         bound = _angle_bound(self.rate, m, t) if m is not None else None
+        limit = next((L for L in POLYNOMIAL_LIMITS if bound is not None and bound <= L), POLYNOMIAL_LIMIT)
         kernel = "polynomial" if bound is not None and bound <= POLYNOMIAL_LIMIT else "general"
         first = (m is not None and self.parts is None and all(isinstance(f, AxisRotation) for f in flows)
                  and m.ndim >= 2)
-        return dataclasses.replace(self, kernel=kernel, components_first=bool(first))
+        return dataclasses.replace(self, kernel=kernel, angle_limit=limit, components_first=bool(first))
 
 
 def _momentum_or_none(x0, parts):
@@ -306,7 +316,8 @@ class AxisRotation(AbstractRotation):
     """Exact flow of H = ½ c m_k²: every declared part turned by R_k(θ), θ = c m_k t.
 
     ``rate`` = c (an array: traced); ``axis`` = k and ``parts`` (see the module docstring)
-    are static, as are ``kernel`` and ``components_first`` (chosen per run by ``for_run``).
+    are static, as are ``kernel``, ``angle_limit`` and ``components_first`` (chosen per run
+    by ``for_run``).
     A one-parameter group (m_k is invariant).
     """
 
@@ -314,6 +325,7 @@ class AxisRotation(AbstractRotation):
     rate: jax.Array = eqx.field(converter=jnp.asarray)
     parts: tuple | None = eqx.field(static=True, default=None, converter=check_parts)
     kernel: str = eqx.field(static=True, default="general")
+    angle_limit: float = eqx.field(static=True, default=POLYNOMIAL_LIMIT)
     components_first: bool = eqx.field(static=True, default=False)
 
     def __check_init__(self):
@@ -325,13 +337,13 @@ class AxisRotation(AbstractRotation):
 
     def __call__(self, state, t):
         angle = self.angle(state, t)
-        c, s = cos_sin(angle, self.kernel)
+        c, s = cos_sin(angle, self.kernel, self.angle_limit)
         if self.parts is None:  # the free body: the bare two-component update (hot path)
             return _turn_axis(state, self.axis, c, s, self.components_first)
         e = jnp.zeros(3, angle.dtype).at[self.axis].set(1)
 
         def quaternion():
-            ch, sh = cos_sin(angle / 2, self.kernel)
+            ch, sh = cos_sin(angle / 2, self.kernel, self.angle_limit)
             return _half_angle_quaternion(e, ch, sh)
 
         return _turn_state(state, self.parts,
@@ -350,7 +362,7 @@ class AxisRotation(AbstractRotation):
         m = self._momentum(x_after)
         m_k = _component(m, k, first)
         rate = self.rate.astype(m.dtype)
-        c, s = cos_sin(rate * m_k * t, self.kernel)
+        c, s = cos_sin(rate * m_k * t, self.kernel, self.angle_limit)
 
         def back(v, extra):
             return _turn_axis(v, k, _expand(c, extra), -_expand(s, extra), first)
@@ -403,6 +415,7 @@ class VectorRotation(AbstractRotation):
     rate: jax.Array = eqx.field(converter=jnp.asarray)
     parts: tuple | None = eqx.field(static=True, default=None, converter=check_parts)
     kernel: str = eqx.field(static=True, default="general")
+    angle_limit: float = eqx.field(static=True, default=POLYNOMIAL_LIMIT)
     components_first: bool = eqx.field(static=True, default=False)  # never set: acts on the last axis
 
     def __call__(self, state, t):
@@ -410,14 +423,14 @@ class VectorRotation(AbstractRotation):
         n = self.direction.astype(m.dtype)
         n = n / jnp.linalg.norm(n, axis=-1, keepdims=True)
         angle = self.rate.astype(m.dtype) * jnp.sum(n * m, axis=-1) * t
-        c, s = cos_sin(angle, self.kernel)
+        c, s = cos_sin(angle, self.kernel, self.angle_limit)
 
         def turn(v, extra):
             nn = n.reshape(n.shape[:-1] + (1,) * extra + (3,))
             return _turn_vector(v, nn, _expand(c, extra), _expand(s, extra))
 
         def quaternion():
-            ch, sh = cos_sin(angle / 2, self.kernel)
+            ch, sh = cos_sin(angle / 2, self.kernel, self.angle_limit)
             return _half_angle_quaternion(n, ch, sh)
 
         return _turn_state(state, self.parts, turn, quaternion)
