@@ -45,6 +45,19 @@ def test_a_long_horizon_batch_on_a_near_symmetric_body():
     assert _error(choice, states, choice.h, choice.n_steps, reference) <= SAFETY * 1e-8
 
 
+def test_round_off_at_the_smallest_pilot_steps_is_not_read_as_truncation_error():
+    """A high-order scheme reaches the pilot's round-off floor (~1e-12) well inside the ladder;
+    those points would imply an error constant orders of magnitude too large."""
+    from jaxsplit.systems import _auto
+
+    step = jaxsplit.splitting(BODY, "kahan-li-8", "casimir")
+    hs, constant, t = 1.5 * 2.0 ** -np.arange(0, 7.5, 0.5), 2e-8, 20.0
+    errors = np.maximum(constant * hs**8 * t, 1e-12)  # truncation error, then the round-off floor
+    assert np.max(errors / (hs**8 * t)) > 1e3 * constant  # the trap is in the data
+    row = _auto._candidate(step, step.scheme, "casimir", {}, hs, errors, t, 1e-8, 1000.0, M0, (2.2e-13, 1e-3))
+    assert row["error_constant"] == pytest.approx(constant, rel=1e-9)
+
+
 def test_bad_requests_are_one_line_errors():
     with pytest.raises(InputError, match="tol must be a positive number"):
         jaxsplit.auto_splitting(BODY, M0, tol=0.0, t_end=10.0)

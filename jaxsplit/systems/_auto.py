@@ -1,8 +1,9 @@
 """``auto_splitting``: the scheme, split and step size that reach a tolerance at the least cost.
 
 Cost model (measured, ``benchmarks/kernel.py``): a run costs its rotations, n_steps ×
-``flows_per_step``, weighted by the kernel the run gets (the polynomial one where the angle
-bound allows the step size; the general one, ``GENERAL_COST`` times dearer, beyond). Error model: for each
+``flows_per_step``, weighted by the kernel the run gets: the polynomial one where the angle
+bound allows the step size (cheaper the smaller the bound: ``POLYNOMIAL_COST``), the general
+one, ``GENERAL_COST`` times dearer, beyond. Error model: for each
 candidate (scheme, split) a pilot run over a short horizon T_p measures the global error
 e(h) against a tight reference at a ladder of step sizes (each step size run for its own
 count, h traced: one compilation per split); in the asymptotic window the error constant
@@ -28,12 +29,16 @@ from ..core._state import as_state, float_dtype, ravel
 from ._base import AbstractSystem
 
 CANDIDATES = ("strang", "blanes-moan-s6-prk", "kahan-li-6", "kahan-li-8", "sofroniou-spaletta-10")
-# Time per rotation of the general kernel relative to the polynomial one (benchmarks/results/kernel.md,
-# float64: 1.1x for one trajectory, 12x for a batch of 1e4 states laid out components-first).
+# Time per rotation relative to the polynomial kernel truncated for |θ| <= 1 (benchmarks/results/kernel.md,
+# float64, one trajectory and a batch of 1e4 states laid out components-first): the general kernel, and
+# the polynomial one truncated for each smaller bound.
 GENERAL_COST = {"one state": 1.1, "batch": 12.0}
+POLYNOMIAL_COST = {"one state": {0.125: 0.73, 0.25: 0.8, 0.5: 0.88, 1.0: 1.0},
+                   "batch": {0.125: 0.64, 0.25: 0.72, 0.5: 0.8, 1.0: 1.0}}
 PILOT_ANGLES = 1.5 * 2.0 ** -np.arange(0, 7.5, 0.5)  # largest sub-step angle |c m| h of the pilot ladder (rad)
 PILOT_TIME = 20.0  # pilot horizon in units of the fastest rotation's period / 2π (1/rate)
 WINDOW = (1e3, 1e-3)  # asymptotic window: errors above 1e3 eps·|x| (round-off) and below 1e-3·|x|
+FLOOR_MARGIN = 30.0  # and above 30× the smallest pilot error: the pilot's own accumulated round-off
 
 
 class AutoSplitting(NamedTuple):
@@ -139,8 +144,11 @@ def _pilot_errors(step, x0, t, counts, reference):
 
 def _candidate(step, scheme, split, options, hs, errors, pilot_time, tol, t_end, x0, window):
     p = scheme.order
-    inside = (errors > window[0]) & (errors < window[1])
-    if np.all(errors <= window[0]):  # exact to round-off at every pilot step (e.g. a symmetric body)
+    # round-off accumulated over the pilot's thousands of steps (~1e-12 in float64) would read as a
+    # huge error constant at the smallest steps of a high-order scheme
+    floor = max(window[0], FLOOR_MARGIN * float(np.min(errors)))
+    inside = (errors > floor) & (errors < window[1])
+    if np.all(errors <= floor):  # exact to round-off at every pilot step (e.g. a symmetric body)
         constant = 0.0
     elif np.any(inside):
         constant = float(np.max(errors[inside] / (hs[inside] ** p * pilot_time)))
@@ -152,8 +160,12 @@ def _candidate(step, scheme, split, options, hs, errors, pilot_time, tol, t_end,
     n_steps = max(1, math.ceil(t_end / h))
     h = t_end / n_steps
     fast = step.for_run(x0, h)
-    general = GENERAL_COST["batch" if fast.structure_of_arrays else "one state"]
-    cost = n_steps * fast.flows_per_step * (1.0 if fast.kernel == "polynomial" else general)
+    layout = "batch" if fast.structure_of_arrays else "one state"
+    if fast.kernel == "polynomial":
+        per_rotation = POLYNOMIAL_COST[layout][max(f.angle_limit for f in fast.flows)]
+    else:
+        per_rotation = GENERAL_COST[layout]
+    cost = n_steps * fast.flows_per_step * per_rotation
     return {"scheme": scheme.name, "split": split, "options": dict(options), "h": h, "n_steps": n_steps,
             "error_constant": constant, "predicted_error": constant * h**p * t_end, "kernel": fast.kernel,
             "cost": float(cost), "step": step}
