@@ -1,24 +1,41 @@
-"""Helpers shared by the benchmark scripts (timing, machine info, matrix-free flows).
+"""Helpers shared by the benchmark scripts: interleaved timing, paired ratios, the machine
+record, and writing one results table per script."""
 
-Nothing here is library code: ``ScalarRotation`` and ``Barrier`` are the benchmarks'
-demonstrations of the speed-ups suggested in ``benchmarks/README.md``.
-"""
-
+import itertools
+import json
+import math
 import os
 import platform
 import statistics
+import subprocess
+import sys
 import time
+from pathlib import Path
 
-import equinox as eqx
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 import jaxsplit
 
+RESULTS = Path(__file__).resolve().parent / "results"
+
+# How tables and plots name the registry's schemes: author, order (the registry's names are kebab-case keys).
+SCHEME_LABELS = {"strang": "Strang (order 2)", "blanes-moan-s6-prk": "Blanes–Moan S6 partitioned (order 4)",
+                 "kahan-li-6": "Kahan–Li (order 6)", "kahan-li-8": "Kahan–Li (order 8)",
+                 "kahan-li-10": "Kahan–Li (order 10)", "sofroniou-spaletta-10": "Sofroniou–Spaletta (order 10)"}
+
+
+def scheme_label(name: str) -> str:
+    return SCHEME_LABELS.get(name, name)
+
+
+def log(msg: str):
+    print(f"[{time.strftime('%H:%M:%S')}] {msg}", file=sys.stderr, flush=True)
+
 
 def interleaved(cases: dict, repeats: int) -> dict:
-    """Run every case once per round, ``repeats`` rounds; seconds per call, per case."""
+    """Run every case once per round, ``repeats`` rounds (load from other jobs hits all
+    cases alike); seconds per call, per case."""
     times = {name: [] for name in cases}
     for _ in range(repeats):
         for name, fn in cases.items():
@@ -33,29 +50,19 @@ def paired_ratio(times: dict, name: str, base: str) -> float:
     return statistics.median(a / b for a, b in zip(times[name], times[base]))
 
 
-def aot(fn, *args):
-    """Compile ``jit(fn)`` for ``args`` ahead of time; (compiled, compile seconds)."""
-    t0 = time.perf_counter()
-    compiled = jax.jit(fn).lower(*args).compile()
-    return compiled, time.perf_counter() - t0
+def ready(fn, *args):
+    """A call of the compiled ``fn(*args)`` that waits for the result."""
+    return lambda: jax.block_until_ready(fn(*args))
 
 
-def ready(compiled, *args):
-    return lambda: jax.block_until_ready(compiled(*args))
-
-
-def machine_info(command: str) -> dict:
-    import scipy
-
-    return {
-        "command": command,
-        "date_utc": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
-        "machine": f"{platform.machine()}, {os.cpu_count()} CPUs (shared with other jobs)",
-        "git": git_state(),
-        "load_average_at_start": [round(v, 2) for v in os.getloadavg()],
-        "versions": {"python": platform.python_version(), "jax": jax.__version__, "numpy": np.__version__,
-                     "scipy": scipy.__version__, "jaxsplit": jaxsplit.__version__},
-    }
+def time_to_reach(points, target: float):
+    """Log-log interpolated time at which (error, time) points reach error ``target`` (None if not bracketed)."""
+    pts = sorted((e, t) for e, t in points if e > 0)
+    for (e_lo, t_lo), (e_hi, t_hi) in itertools.pairwise(pts):
+        if e_lo <= target <= e_hi:
+            w = (math.log(target) - math.log(e_hi)) / (math.log(e_lo) - math.log(e_hi))
+            return math.exp(math.log(t_hi) + w * (math.log(t_lo) - math.log(t_hi)))
+    return None
 
 
 def fmt(seconds: float) -> str:
@@ -66,77 +73,36 @@ def fmt(seconds: float) -> str:
     return f"{seconds * 1e6:.3g} µs"
 
 
-def git_state() -> str:
-    """HEAD commit, and whether the rotation code in the working tree differs from it."""
-    import subprocess
-
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+def machine_info(command: str) -> dict:
+    root = Path(__file__).resolve().parent.parent
     try:
-        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True,
-                              text=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "diff", "--name-only", "HEAD", "--", "jaxsplit"], cwd=root,
-                               capture_output=True, text=True, check=True).stdout.split()
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True,
+                              check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", "jaxsplit"], cwd=root, capture_output=True,
+                               text=True, check=True).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
-        return "unknown"
-    return head + (f" + uncommitted changes in {', '.join(dirty)}" if dirty else "")
+        head, dirty = "unknown", ""
+    return {
+        "command": command,
+        "date_utc": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+        "machine": f"{platform.machine()}, {os.cpu_count()} CPUs (shared with other jobs), {jax.devices()[0].platform}",
+        "git": head + (" + uncommitted library changes" if dirty else ""),
+        "load_average_at_start": [round(v, 2) for v in os.getloadavg()],
+        "versions": {"python": platform.python_version(), "jax": jax.__version__, "numpy": np.__version__,
+                     "jaxsplit": jaxsplit.__version__},
+    }
 
 
-class _RotationVariant(jaxsplit.AbstractFlow):
-    """A rotation about body ``axis`` by θ = rate·m_k·t in a pinned arithmetic form (so the
-    benchmark does not move with the library)."""
-
-    axis: int = eqx.field(static=True)
-    rate: jax.Array
-
-    def angle(self, m, t):
-        return self.rate.astype(m.dtype) * m[self.axis] * t
+def header(out: dict, title: str) -> list[str]:
+    return [f"## {title}", "", (f"`{out['command']}` — {out['date_utc']}; {out['machine']}; load average at start "
+            f"{', '.join(f'{v:.1f}' for v in out['load_average_at_start'])}; JAX {out['versions']['jax']}; "
+            f"jaxsplit at {out['git']}."), ""]
 
 
-class MatrixRotation(_RotationVariant):
-    """The rotation as a 3x3 matrix product (``rotation_matrix(axis, angle) @ m``), as
-    ``AxisRotation`` computed it at commit 7b2b6c7."""
-
-    def __call__(self, m, t):
-        return jaxsplit.rotation_matrix(self.axis, self.angle(m, t)) @ m
-
-
-class ScalarRotation(_RotationVariant):
-    """The two-component update, stacked."""
-
-    def __call__(self, m, t):
-        k = self.axis
-        i, j = (k + 1) % 3, (k + 2) % 3
-        theta = self.angle(m, t)
-        c, s = jnp.cos(theta), jnp.sin(theta)
-        out = [None] * 3
-        out[k], out[i], out[j] = m[k], c * m[i] + s * m[j], -s * m[i] + c * m[j]
-        return jnp.stack(out)
-
-
-class CorrectionRotation(_RotationVariant):
-    """The rotation as a correction in its plane, m + e_i((c−1)m_i + s m_j) + e_j((c−1)m_j − s m_i)
-    (a candidate studied on 2026-11-21)."""
-
-    def __call__(self, m, t):
-        k = self.axis
-        i, j = (k + 1) % 3, (k + 2) % 3
-        theta = self.angle(m, t)
-        c, s = jnp.cos(theta), jnp.sin(theta)
-        e_i, e_j = (jnp.asarray(np.eye(3)[q], dtype=m.dtype) for q in (i, j))
-        return m + e_i * ((c - 1) * m[i] + s * m[j]) + e_j * ((c - 1) * m[j] - s * m[i])
-
-
-_VARIANTS = {"matrix": MatrixRotation, "scalar": ScalarRotation, "correction": CorrectionRotation}
-
-
-def step_variant(body, scheme: str, split: str, variant: str, shift=1):
-    """A jaxsplit step: ``library`` (``jaxsplit.splitting`` as the working tree has it) or
-    the library's generic composer over flows of a pinned rotation form (``matrix``,
-    ``scalar``, ``correction``; the composer puts an optimization barrier on every
-    sub-flow, so ``+barrier`` names the same step)."""
-    options = {"shift": shift} if split == "casimir" else {}
-    if variant == "library":
-        return jaxsplit.splitting(body, scheme, split, **options)
-    flows = body.split(split, **options)
-    cls = _VARIANTS[variant.removesuffix("+barrier")]
-    return jaxsplit.compose(tuple(cls(f.axis, f.rate) for f in flows), scheme)
+def write(stem: str, quick: bool, out: dict, lines: list[str]):
+    """``results/<stem>{-quick}.{json,md}``; the table is printed too."""
+    RESULTS.mkdir(exist_ok=True)
+    stem = stem + ("-quick" if quick else "")
+    (RESULTS / f"{stem}.json").write_text(json.dumps(out, indent=1, default=float))
+    (RESULTS / f"{stem}.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))

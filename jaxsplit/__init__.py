@@ -94,6 +94,8 @@ if typing.TYPE_CHECKING:
     from .paper import audit_paper as audit_paper
     from .systems._attitude import Attitude as Attitude
     from .systems._attitude import attitude as attitude
+    from .systems._auto import AutoSplitting as AutoSplitting
+    from .systems._auto import auto_splitting as auto_splitting
     from .systems._base import AbstractSystem as AbstractSystem
     from .systems._exact import exact_solution as exact_solution
     from .systems._gravity_gradient import GravityGradient as GravityGradient

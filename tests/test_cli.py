@@ -17,6 +17,7 @@ from jaxsplit.cli._metadata import read_metadata
 CHUNK_RTOL = 1e-13
 # A splitting of exact rotations keeps the Casimir to round-off over 10^4 steps.
 CASIMIR_TOL = 1e-12
+ROUNDOFF_ULPS = 8  # two computations of one round-off-level maximum agree to a few ulps
 
 
 def _json_out(capsys):
@@ -69,7 +70,9 @@ def test_json_summary_matches_the_saved_trajectory(capsys, tmp_path):
     energy = 0.5 * np.sum(m * m / inertia, axis=1)
     casimir = 0.5 * np.sum(m * m, axis=1)
     assert s["energy_error_max"] == pytest.approx(np.max(np.abs(energy / energy[0] - 1)), rel=1e-12)
-    assert s["casimir_error_max"] == pytest.approx(np.max(np.abs(casimir / casimir[0] - 1)), rel=1e-12, abs=1e-18)
+    # at round-off level the summary (on device) and the file's column (recomputed here) differ by ulps
+    assert s["casimir_error_max"] == pytest.approx(np.max(np.abs(casimir / casimir[0] - 1)), rel=1e-12,
+                                                   abs=ROUNDOFF_ULPS * np.finfo(np.float64).eps)
     assert s["casimir_error_max"] < CASIMIR_TOL
     exact = np.asarray(jaxsplit.symmetric_solution(jaxsplit.RigidBody(inertia), jnp.asarray(jaxsplit.PAPER_M0),
                                                    jnp.asarray(t)))
@@ -88,7 +91,8 @@ def test_csv_holds_the_same_trajectory_as_npz(capsys, tmp_path):
     npz, meta = read(str(tmp_path / "a.npz"))
     csv, csv_meta = read(str(tmp_path / "b.csv"))
     text = (tmp_path / "b.csv").read_text().splitlines()
-    assert text[0].startswith("# metadata: ") and csv_meta == meta
+    stamp = "created_utc"  # two runs: their clocks may straddle a second
+    assert text[0].startswith("# metadata: ") and {**csv_meta, stamp: None} == {**meta, stamp: None}
     assert text[1] == "# t,step,m1,m2,m3,energy,casimir,m_exact1,m_exact2,m_exact3"
     assert sorted(csv) == sorted(npz)
     for key, value in npz.items():  # %.17g round-trips float64 exactly

@@ -218,8 +218,9 @@ def test_float32_drift_is_reported_and_the_projection_is_opt_in(capsys):
     projected = json.loads(capsys.readouterr().out)
     assert projected["projection"] == "|m| restored after every step"
     drift, kept = plain["casimir_error_max"], projected["casimir_error_max"]
-    assert drift > 1e-5  # float32 round-off accumulates over 2e4 steps of 9 stages (measured ~1e-4)
-    assert kept < 1e-6 and kept < drift / 100  # the projection holds |m| at float32 round-off
+    eps32 = float(np.finfo(np.float32).eps)
+    assert drift > 1e-5  # float32 round-off accumulates over 2e4 steps of 9 stages (measured 1.5e-5)
+    assert kept <= 4 * eps32 and drift > 10 * kept  # the projection holds |m| at float32 round-off
 
 
 # ---------------------------------------------------------------- figures: honest orbits and maxima
@@ -265,6 +266,12 @@ def test_tol_runs_what_auto_splitting_chose(monkeypatch, capsys):
     assert (s["scheme"], s["split"], s["shift_axis"], s["dt"], s["steps"]) == ("strang", "casimir", 2, 0.05, 40)
     assert s["tol"] == 1e-5 and s["predicted_error"] == 3e-6
     assert s["exact_error_max"] < 1e-4  # what the run measured, next to the prediction
-    monkeypatch.delattr(jaxsplit, "auto_splitting")
-    assert main(["simulate", "--tol", "1e-5", "--no-save"]) == 2
-    assert "--tol needs jaxsplit.auto_splitting" in capsys.readouterr().err
+
+
+def test_tol_reaches_the_tolerance_it_was_given(capsys):
+    """The real choice (no stand-in): the measured error against the exact solution meets --tol."""
+    tol = 1e-6
+    assert main(["simulate", "--tol", str(tol), "--t-end", "20", "--inertia", "3,2,1.5", "--no-save", "--json",
+                 "--quiet"]) == 0
+    s = _json(capsys)
+    assert s["tol"] == tol and s["exact_error_max"] <= tol, s

@@ -11,7 +11,7 @@ import jaxsplit
 import jaxsplit.diffrax
 
 AREAS = docs_hooks().public_names()
-WITH_EXAMPLES = ("core", "checks", "classical", "explore")  # every public name has a runnable example
+WITH_EXAMPLES = ("core", "systems", "checks", "classical", "explore", "paper")  # every public name: a runnable example
 DATA = (dict, tuple)  # registries and constants: documented where they are defined, no docstring of their own
 FLAGS = doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE
 

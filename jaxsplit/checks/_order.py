@@ -15,6 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..core._compose import Composition
 from ..core._errors import InputError
 from ..core._integrate import integrate
 from ..core._state import as_state, float_dtype, is_floating
@@ -85,6 +86,8 @@ def global_errors(step, x0, t_end: float, counts, reference):
         raise InputError(f"step counts must be >= 1, got {counts.tolist()}")
     x0 = as_state(x0)
     hs = jnp.asarray(t_end / counts, dtype=float_dtype(x0))
+    if isinstance(step, Composition):
+        step = step.for_run(x0, float(np.max(np.abs(np.asarray(hs)))))  # the kernel for the largest step
     saved = jax.vmap(lambda h: integrate(step, x0, h, int(counts[-1]), save_every=1).x)(hs)
     rows = jnp.arange(len(counts))
     finals = jax.tree_util.tree_map(lambda a: a[rows, counts], saved)

@@ -263,13 +263,9 @@ def _auto(args, prob):
         raise InputError(f"--tol chooses the scheme, the split and the step: drop {', '.join(given)} (give --t-end)")
     import jaxsplit
 
-    auto_splitting = getattr(jaxsplit, "auto_splitting", None)
-    if auto_splitting is None:
-        raise InputError("--tol needs jaxsplit.auto_splitting (the automatic choice of scheme, split and step), which "
-                         "this build of jaxsplit does not have; give --scheme and --dt instead")
     t_end = args.t_end if args.t_end is not None else (
         float(np.max(np.abs(args.save_at))) if args.save_at is not None else DEFAULT_STEPS * DEFAULT_DT)
-    choice = auto_splitting(prob.system, prob.state(), tol=args.tol, t_end=t_end)
+    choice = jaxsplit.auto_splitting(prob.system, prob.state(), tol=args.tol, t_end=t_end)
     n_steps = _bounds.at_most(int(choice.n_steps), _bounds.MAX_STEPS, "the step count --tol chose",
                               "step indices exact in float64", "give a larger --tol or a shorter --t-end")
     method = _problem.Method(_bounds.scheme(choice.scheme), choice.split, dict(choice.options), True)

@@ -5,11 +5,15 @@
 * ``"checkpoint"``: blocks of B = ⌈√n⌉ steps under ``jax.checkpoint``; reverse mode stores one
   state per block and recomputes a block at a time: memory O(n/B + B) = O(√n), about one
   extra forward run of cost.
-* ``"reversible"``: for a time-symmetric composition of exact flows Ψ_{−h} = Ψ_h⁻¹, so the
-  backward pass rebuilds every state by stepping back from the last one instead of storing
-  it (a ``jax.custom_vjp``): memory independent of n. The rebuilt states differ from the
-  forward ones by accumulated round-off only (measured in the tests and benchmarks).
-  Forward-mode differentiation is not available through it (a custom VJP).
+* ``"reversible"``: for a composition of reversible flows (φ_{−t} = φ_t⁻¹: exact group
+  flows, or time-symmetric compositions of them) the backward pass rebuilds every state by
+  stepping back from the last one instead of storing it (a ``jax.custom_vjp``): memory
+  independent of n. ``Composition.retrace`` walks the applied sub-flows backwards, each
+  flow's ``step_back`` giving the state before it and the pulled-back cotangent in one
+  pass (a rotation fuses both and shares its cos and sin; other flows use ``jax.vjp`` of
+  one call). The scheme need not be symmetric: the word is inverted sub-flow by sub-flow.
+  The rebuilt states differ from the forward ones by accumulated round-off only (measured
+  in the tests and benchmarks). Forward-mode differentiation is not available through it.
 
 Every advance takes a Python-int or a traced step count (the latter for output at
 arbitrary times, where ``lax.fori_loop``/``while`` loops are not reverse-differentiable
@@ -24,6 +28,7 @@ import jax.numpy as jnp
 
 from ._compose import Composition
 from ._errors import InputError
+from ._flows import join_parameters, split_parameters
 
 ADJOINTS = ("store", "checkpoint", "reversible")
 
@@ -32,16 +37,13 @@ def check_adjoint(adjoint: str, step) -> str:
     if adjoint not in ADJOINTS:
         raise InputError(f"adjoint must be one of {ADJOINTS}, got {adjoint!r}")
     if adjoint == "reversible":
-        scheme = getattr(step, "scheme", None)
-        if not isinstance(step, Composition) or scheme is None:
-            raise InputError("adjoint='reversible' needs a Composition (a splitting) whose scheme is time-symmetric, "
-                             f"got {type(step).__name__}")
-        if not scheme.symmetric:
-            raise InputError(f"adjoint='reversible' needs a time-symmetric scheme (Ψ_-h = Ψ_h⁻¹); {scheme.name!r} is "
-                             "not: use a symmetric scheme, or adjoint='checkpoint'")
-        bad = [type(f).__name__ for f in step.flows if not f.is_group]
+        if not isinstance(step, Composition):
+            raise InputError("adjoint='reversible' needs a Composition (a splitting) of reversible flows, "
+                             f"got {type(step).__name__}: use adjoint='checkpoint'")
+        bad = [type(f).__name__ for f in step.flows if not f.is_reversible]
         if bad:
-            raise InputError(f"adjoint='reversible' needs exact group flows (φ_-t = φ_t⁻¹); {', '.join(bad)} is not")
+            raise InputError(f"adjoint='reversible' needs flows with φ_-t = φ_t⁻¹ (exact group flows, or "
+                             f"time-symmetric compositions of them); {', '.join(bad)} is not: use adjoint='checkpoint'")
     return adjoint
 
 
@@ -72,27 +74,15 @@ def advance_checkpointed(step, x, h, n: int, block: int | None = None):
 
 
 # ------------------------------------------------------------------ the reversible adjoint
-def _split(step):
-    from ._integrate import split_parameters
-
-    return split_parameters(step)
-
-
-def _join(parameters, static):
-    from ._integrate import join_parameters
-
-    return join_parameters(parameters, static)
-
-
 def advance_reversible(step, x, h, n):
     """``n`` steps whose VJP rebuilds the states by stepping back (O(1) memory)."""
-    parameters, static = _split(step)
+    parameters, static = split_parameters(step)
     return _reversible(static, parameters, x, h, jnp.asarray(n, dtype=jnp.int32))
 
 
 @functools.partial(jax.custom_vjp, nondiff_argnums=(0,))
 def _reversible(static, parameters, x, h, n):
-    return advance_stored(_join(parameters, static), x, h, n)
+    return advance_stored(join_parameters(parameters, static), x, h, n)
 
 
 def _reversible_fwd(static, parameters, x, h, n):
@@ -100,27 +90,10 @@ def _reversible_fwd(static, parameters, x, h, n):
     return y, (parameters, y, h, n)
 
 
-def _add(a, b):
-    return jax.tree_util.tree_map(lambda u, v: u + v, a, b)
-
-
 def _reversible_bwd(static, residuals, ct_y):
     parameters, y, h, n = residuals
-
-    def apply(p, state, size):
-        return _join(p, static)(state, size)
-
-    def back(carry):
-        k, after, ct_x, ct_p, ct_h = carry
-        before = apply(parameters, after, -h)  # Ψ_-h = Ψ_h⁻¹ rebuilds the earlier state
-        _, vjp = jax.vjp(apply, parameters, before, h)
-        dp, dx, dh = vjp(ct_x)
-        return k + 1, before, dx, _add(ct_p, dp), ct_h + dh
-
-    zeros_p = jax.tree_util.tree_map(jnp.zeros_like, parameters)
-    start = (jnp.zeros((), jnp.int32), y, ct_y, zeros_p, jnp.zeros_like(h))
-    _, _, ct_x, ct_p, ct_h = jax.lax.while_loop(lambda c: c[0] < n, back, start)
-    return ct_p, ct_x, ct_h, None
+    _, ct_x, ct_parameters, ct_h = join_parameters(parameters, static).retrace(y, h, n, ct_y)
+    return ct_parameters, ct_x, ct_h, None
 
 
 _reversible.defvjp(_reversible_fwd, _reversible_bwd)

@@ -9,6 +9,7 @@ boundary as well (first-same-as-last); ``Composition.advance`` does that inside 
 of a given word length shares one compilation.
 """
 
+import dataclasses
 from collections.abc import Sequence
 
 import equinox as eqx
@@ -17,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._errors import InputError
-from ._flows import AbstractFlow, as_flow
+from ._flows import AbstractFlow, as_flow, split_parameters
 from ._schemes import Scheme, schemes
 from ._state import float_dtype
 
@@ -80,6 +81,14 @@ def _like_state(h, state):
     return jnp.asarray(h, dtype=float_dtype(state))
 
 
+def _components_first(state):
+    return jnp.moveaxis(state, -1, 0)
+
+
+def _components_last(state):
+    return jnp.moveaxis(state, 0, -1)
+
+
 class Composition(AbstractFlow):
     """A composed one-step map ``step(state, h)``; itself a flow (not a group), so it can
     be a piece of another composition. Built by ``compose``.
@@ -91,7 +100,10 @@ class Composition(AbstractFlow):
     Traced: the flows are its PyTree children, so their array fields (inertia, rates) are
     traced wherever the step goes (``jit``, ``vmap``, ``grad``), and so are ``state`` and
     ``h``. Static: ``word`` (the merged (piece, weight) sequence), ``scheme`` and ``fsal``
-    (first-same-as-last merging across steps in ``advance``).
+    (first-same-as-last merging across steps in ``advance``) and ``structure_of_arrays``.
+    ``for_run`` returns the same map made fastest for one run (each flow's kernel; for a
+    batch, the components moved first inside the step: ``structure_of_arrays``, invisible
+    from outside).
 
     >>> import jax.numpy as jnp, jaxsplit
     >>> step = jaxsplit.splitting(jaxsplit.RigidBody([2.0, 1.0, 0.5]), "strang", "casimir", shift=1)
@@ -106,27 +118,140 @@ class Composition(AbstractFlow):
     word: Word = eqx.field(static=True)
     scheme: Scheme | None = eqx.field(static=True, default=None)
     fsal: bool = eqx.field(static=True, default=False)
+    structure_of_arrays: bool = eqx.field(static=True, default=False)
 
     def __call__(self, state, h):
-        return _apply(self.flows, self.word, state, _like_state(h, state))
+        return self._in_layout(lambda x: _apply(self.flows, self.word, x, _like_state(h, x)), state)
+
+    def _in_layout(self, run, state):
+        if not self.structure_of_arrays:
+            return run(state)
+        return _components_last(run(_components_first(state)))
 
     @property
     def is_group(self) -> bool:
         return False
+
+    def reach(self) -> tuple[float, ...]:
+        """The largest |weight| each piece is called with (sub-steps are weight·h), merges
+        across steps included."""
+        out = [0.0] * len(self.flows)
+        for piece, weight in self.word:
+            out[piece] = max(out[piece], abs(weight))
+        if self.fsal:
+            piece = self.word[0][0]
+            out[piece] = max(out[piece], abs(self.word[0][1] + self.word[-1][1]))
+        return tuple(out)
+
+    def for_run(self, x0, h, step=None) -> "Composition":
+        """The same map made fastest for a run from ``x0`` with steps |h'| <= |h| (and states
+        no larger than ``x0``): every flow's ``for_run`` (e.g. a rotation kernel valid for the
+        angles such a run can reach). ``integrate`` calls it with concrete values; call it
+        yourself before your own ``jit`` (with the largest state and step of your runs).
+        As a piece of another composition (``step`` given) it stays general: the other
+        pieces may change what bounds its flows."""
+        if step is not None or any(isinstance(v, jax.core.Tracer) for v in jax.tree_util.tree_leaves((x0, h))):
+            return self
+        size = abs(float(np.asarray(h)))
+        flows = tuple(f.for_run(x0, w * size, self) for f, w in zip(self.flows, self.reach()))
+        firsts = {f.components_first for f in flows}
+        if len(firsts) > 1:  # all or none: the layout is the composition's
+            flows = tuple(dataclasses.replace(f, components_first=False) if f.components_first else f
+                          for f in flows)
+        return Composition(flows, self.word, self.scheme, self.fsal, firsts == {True})
+
+    @property
+    def kernels(self) -> tuple[str, ...]:
+        """Each flow's trigonometry kernel ("general" for flows without a choice)."""
+        return tuple(getattr(f, "kernel", "general") for f in self.flows)
+
+    @property
+    def kernel(self) -> str:
+        """"polynomial" (every flow), "general" (none) or "mixed": what ``for_run`` chose."""
+        kinds = set(self.kernels)
+        return kinds.pop() if len(kinds) == 1 else "mixed"
+
+    @property
+    def is_reversible(self) -> bool:
+        """Ψ_{−h} = Ψ_h⁻¹ (as a piece of another composition): a time-symmetric scheme of
+        reversible flows."""
+        return self.scheme is not None and self.scheme.symmetric and all(f.is_reversible for f in self.flows)
+
+    def _sequences(self):
+        """``advance``'s sub-flows for n steps as (head, body repeated, tail): n × word, or with
+        first-same-as-last merging head + (n − 1) × joint + tail."""
+        if not self.fsal:
+            return (), self.word, ()
+        (piece, first), middle, (_, last) = self.word[0], self.word[1:-1], self.word[-1]
+        return ((piece, first),), middle + ((piece, last + first),), middle + ((piece, last),)
+
+    def retrace(self, x_after, h, n, ct_after):
+        """The reversible adjoint's backward pass over ``n`` steps: ``advance``'s exact
+        sequence of sub-flows walked backwards, each flow's ``step_back`` rebuilding the
+        state before it and pulling the cotangent through it. Returns (x0, ct_x0,
+        ct_parameters in ``split_parameters`` order, ct_h); memory independent of n. Needs
+        reversible flows (φ_{−t} = φ_t⁻¹), not a symmetric scheme: the word is inverted
+        sub-flow by sub-flow."""
+        if self.structure_of_arrays:
+            x_after, ct_after = _components_first(x_after), _components_first(ct_after)
+        h = _like_state(h, x_after)
+        zeros = tuple(jax.tree_util.tree_map(jnp.zeros_like, split_parameters(f)[0]) for f in self.flows)
+
+        def back(sub_flows):
+            def run(carry):
+                x, ct, acc, ct_h = carry
+                acc = list(acc)
+                for piece, weight in reversed(sub_flows):
+                    x, ct, dp, dt = self.flows[piece].step_back(x, weight * h, ct)
+                    acc[piece] = jax.tree_util.tree_map(jnp.add, acc[piece], dp)
+                    ct_h = ct_h + weight * dt
+                    # as in _apply: keeps XLA from fusing (and recomputing) a whole word; without it a
+                    # Sofroniou–Spaletta 10 gradient (Casimir split) did not finish in 5 minutes
+                    x, ct, acc = jax.lax.optimization_barrier((x, ct, acc))
+                return x, ct, tuple(acc), ct_h
+            return run
+
+        head, body, tail = self._sequences()
+        static = isinstance(n, int)
+
+        def walk(carry):
+            carry = back(tail)(carry)
+            count = n - 1 if head else n
+            if static:
+                carry = jax.lax.scan(lambda c, _: (back(body)(c), None), carry, length=count)[0]
+            else:
+                carry = jax.lax.fori_loop(0, count, lambda _, c: back(body)(c), carry)
+            return back(head)(carry)
+
+        carry = (x_after, ct_after, zeros, jnp.zeros_like(h))
+        if static:
+            carry = walk(carry) if n else carry
+        else:
+            carry = jax.lax.cond(n > 0, walk, lambda c: c, carry)
+        x, ct, acc, ct_h = carry
+        if self.structure_of_arrays:
+            x, ct = _components_last(x), _components_last(ct)
+        return x, ct, [entry for flow_cts in acc for entry in flow_cts], ct_h
 
     def advance(self, state, h, n):
         """``n`` steps, merging the last sub-flow of each step with the first of the next.
 
         ``n`` is a Python int (a ``lax.scan``) or a traced integer (a ``fori_loop``).
         """
+        return self._in_layout(lambda x: self._advance(x, h, n), state)
+
+    def _advance(self, state, h, n):
         h = _like_state(h, state)
         static = isinstance(n, int)
         if static and n == 0:
             return state
         if not self.fsal or (static and n == 1):
+            def one(x):
+                return _apply(self.flows, self.word, x, h)
+
             if static:
-                return jax.lax.scan(lambda x, _: (self(x, h), None), state, length=n)[0]
-            return jax.lax.fori_loop(0, n, lambda _, x: self(x, h), state)
+                return jax.lax.scan(lambda x, _: (one(x), None), state, length=n)[0]
+            return jax.lax.fori_loop(0, n, lambda _, x: one(x), state)
         (piece, first), middle, (_, last) = self.word[0], self.word[1:-1], self.word[-1]
         joint = middle + ((piece, last + first),)
 

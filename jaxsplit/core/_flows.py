@@ -17,6 +17,24 @@ import jax
 import jax.numpy as jnp
 
 
+def _is_parameter(leaf) -> bool:
+    return eqx.is_array(leaf) or type(leaf) is float
+
+
+def split_parameters(module):
+    """(parameters: the array and float leaves, static: (treedef, the other leaves)); the
+    parameter list has one entry per leaf, ``None`` where the leaf is not a parameter."""
+    leaves, treedef = jax.tree_util.tree_flatten(module)
+    parameters = [leaf if _is_parameter(leaf) else None for leaf in leaves]
+    static = tuple(None if _is_parameter(leaf) else leaf for leaf in leaves)
+    return parameters, (treedef, static)
+
+
+def join_parameters(parameters, static):
+    treedef, others = static
+    return jax.tree_util.tree_unflatten(treedef, [p if s is None else s for p, s in zip(parameters, others)])
+
+
 class AbstractFlow(eqx.Module):
     """``flow(state, t) -> state``: the time-``t`` map of one piece (subclass it for your flows).
 
@@ -59,6 +77,39 @@ class AbstractFlow(eqx.Module):
     def is_group(self) -> bool:
         """An exact one-parameter group (adjacent sub-flows may merge). Default: yes."""
         return True
+
+    def for_run(self, x0, t, step) -> "AbstractFlow":
+        """This flow made fastest for one run of ``step`` from ``x0`` in which it is called with
+        sub-steps |s| <= ``t`` (``Composition.for_run``; values may be traced: then keep the
+        general form). A flow may choose a kernel valid only for such runs (the rotations of
+        ``so3``). Default: itself."""
+        return self
+
+    @property
+    def components_first(self) -> bool:
+        """Whether this flow expects an array state with its components on the first axis
+        (structure of arrays: set by ``for_run`` for batches). Default: no."""
+        return False
+
+    @property
+    def is_reversible(self) -> bool:
+        """φ_{−t} = φ_t⁻¹ exactly (a group flow, a time-symmetric composition of such flows):
+        what the reversible adjoint needs to rebuild states by stepping back."""
+        return self.is_group
+
+    def step_back(self, x_after, t, ct_after):
+        """One call of the reversible adjoint's backward pass: the state before this flow,
+        x = φ_{−t}(x_after), and the cotangent ``ct_after`` pulled back through φ_t at x:
+        ``(x, ct_x, ct_parameters, ct_t)`` with ``ct_parameters`` one entry per leaf of the
+        flow (``split_parameters`` order, ``None`` where a leaf is not a parameter).
+
+        Default: φ_{−t} and ``jax.vjp`` of one call. A flow can fuse both (a rotation shares
+        its cos and sin between the inverse and the pullback; its angle is unchanged)."""
+        x = self(x_after, -t)
+        parameters, static = split_parameters(self)
+        _, pullback = jax.vjp(lambda p, y, s: join_parameters(p, static)(y, s), parameters, x, t)
+        ct_parameters, ct_x, ct_t = pullback(ct_after)
+        return x, ct_x, ct_parameters, ct_t
 
 
 class FunctionFlow(AbstractFlow):
@@ -116,6 +167,10 @@ class Substeps(AbstractFlow):
     @property
     def is_group(self) -> bool:
         return False
+
+    @property
+    def is_reversible(self) -> bool:
+        return self.flow.is_reversible
 
 
 class Renormalized(AbstractFlow):

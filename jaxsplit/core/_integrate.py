@@ -31,7 +31,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._adjoints import advance, advance_checkpointed, check_adjoint
+from ._compose import Composition
 from ._errors import InputError
+from ._flows import join_parameters, split_parameters
 from ._state import as_state, float_dtype
 
 
@@ -43,7 +45,9 @@ class Solution(eqx.Module):
     ``finite`` a bool scalar. ``final`` is the last saved state (the end of the run, or the
     last requested time); ``n_steps`` the full steps taken (static; ``None`` for ``ts=`` runs),
     ``scheme`` the scheme's name (static; ``None`` for a plain function), ``status`` is
-    ``"ok"`` / ``"nonfinite"`` (needs concrete values). Under ``vmap`` every array field gains
+    ``"ok"`` / ``"nonfinite"`` (needs concrete values). ``kernel`` is the trigonometry the run's
+    rotations used (``Composition.for_run``: ``"polynomial"``, ``"general"`` or ``"mixed"``;
+    ``None`` for a plain function). Under ``vmap`` every array field gains
     the batch axis. ``Trajectory`` is the former name.
 
     >>> import jax.numpy as jnp, jaxsplit
@@ -59,6 +63,7 @@ class Solution(eqx.Module):
     finite: jax.Array
     n_steps: int | None = eqx.field(static=True)
     scheme: str | None = eqx.field(static=True, default=None)
+    kernel: str | None = eqx.field(static=True, default=None)
 
     @property
     def final(self):
@@ -89,23 +94,6 @@ _TRACES = [0]
 def compilations() -> int:
     """How many times ``integrate``'s loop has been traced (= compiled) in this process."""
     return _TRACES[0]
-
-
-def _is_parameter(leaf) -> bool:
-    return eqx.is_array(leaf) or type(leaf) is float
-
-
-def split_parameters(step):
-    """(parameters: the array and float leaves, static: (treedef, the other leaves))."""
-    leaves, treedef = jax.tree_util.tree_flatten(step)
-    parameters = [leaf if _is_parameter(leaf) else None for leaf in leaves]
-    static = tuple(None if _is_parameter(leaf) else leaf for leaf in leaves)
-    return parameters, (treedef, static)
-
-
-def join_parameters(parameters, static):
-    treedef, others = static
-    return jax.tree_util.tree_unflatten(treedef, [p if s is None else s for p, s in zip(parameters, others)])
 
 
 def _finite(x):
@@ -146,7 +134,7 @@ def _run(parameters, static, x0, h, t0, n_steps: int, save_every: int | None, ad
             counts.append(n_steps)
         xs = _stack(*pieces)
     t = t0 + jnp.asarray(counts, dtype=dtype) * h
-    return Solution(t, xs, h, _finite(xs), n_steps, _scheme_name(step))
+    return Solution(t, xs, h, _finite(xs), n_steps, _scheme_name(step), getattr(step, "kernel", None))
 
 
 @functools.partial(jax.jit, static_argnames=("static", "adjoint"))
@@ -164,7 +152,7 @@ def _run_at(parameters, static, x0, h, t0, ts, adjoint: str):
         return (x, grid[i]), step(x, ts[i] - (t0 + grid[i] * h))
 
     _, xs = jax.lax.scan(output, (x0, jnp.zeros((), jnp.int32)), jnp.arange(ts.shape[0]))
-    return Solution(ts, xs, h, _finite(xs), None, _scheme_name(step))
+    return Solution(ts, xs, h, _finite(xs), None, _scheme_name(step), getattr(step, "kernel", None))
 
 
 def _scheme_name(step):
@@ -224,6 +212,10 @@ def integrate(step, x0, h, n_steps: int | None = None, *, save_every: int | None
     * ``ts=times`` (instead of ``n``): the states at the given times, each a partial step of
       the scheme from the last grid state t0 + k h before it (see the module docstring).
 
+    A ``Composition`` is first made fastest for this run (``Composition.for_run``: a
+    rotation kernel valid for the angles the run can reach, chosen from ``x0`` and ``h``
+    when they are concrete; under your own ``jit``/``vmap`` the general kernel, unless you
+    pass ``step.for_run(x0, h)``); ``Solution.kernel`` says which.
     A negative ``h`` integrates backwards. ``t0`` is the initial time. ``adjoint`` is
     ``"store"``, ``"checkpoint"`` or ``"reversible"`` (see ``jaxsplit.core._adjoints``).
     Works under ``jit``, ``vmap`` and ``grad``; the computation follows the dtype of
@@ -247,6 +239,8 @@ def integrate(step, x0, h, n_steps: int | None = None, *, save_every: int | None
     h = step_size(h)
     if isinstance(t0, (str, bytes, bool)) or t0 is None:
         raise InputError(f"t0 must be a real number, got {t0!r}")
+    if isinstance(step, Composition):  # the fastest kernel and layout this run allows
+        step = step.for_run(x0, h)
     parameters, static = split_parameters(step)
     try:
         hash(static)

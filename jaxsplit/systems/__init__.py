@@ -8,7 +8,8 @@ potential kick) with ``_heavy_top`` and ``_gravity_gradient``, ``_exact`` (the f
 exact solution for any inertia, on the JAX elliptic functions of ``_elliptic``), ``_spin``
 (rotations by a vanishing angle vector, the spin about m, commuting pieces),
 ``_hamilton_poisson`` (a system from two functions: the paper's §2–3 examples),
-``_splitting`` (``splitting``: system + scheme -> step), ``_validate`` (one-line errors for bad
+``_splitting`` (``splitting``: system + scheme -> step), ``_auto`` (``auto_splitting``: the
+cheapest scheme, split and step for a tolerance), ``_validate`` (one-line errors for bad
 concrete parameters and states: ``check_state`` of the spinning-body systems), ``so3``
 (rotations, quaternions, rotation flows that turn declared parts of a state).
 """
@@ -16,6 +17,8 @@ concrete parameters and states: ``check_state`` of the spinning-body systems), `
 from . import so3 as so3
 from ._attitude import Attitude as Attitude
 from ._attitude import attitude as attitude
+from ._auto import AutoSplitting as AutoSplitting
+from ._auto import auto_splitting as auto_splitting
 from ._base import AbstractSystem as AbstractSystem
 from ._exact import exact_solution as exact_solution
 from ._gravity_gradient import GravityGradient as GravityGradient

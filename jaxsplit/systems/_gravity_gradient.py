@@ -26,7 +26,13 @@ from ._validate import check_non_negative
 
 class GravityGradient(BodyInPotential):
     """A rigid satellite (principal moments ``inertia``) in the gravity gradient of a planet,
-    orbital rate ``rate`` = Ω >= 0. Batched leading axes allowed; every parameter is traced."""
+    orbital rate ``rate`` = Ω >= 0. Batched leading axes allowed; every parameter is traced.
+
+    >>> import jax.numpy as jnp, jaxsplit
+    >>> satellite = jaxsplit.gravity_gradient(jnp.array([2.0, 1.0, 2 / 3]), 0.1)
+    >>> sorted(satellite.splits())
+    ['axes', 'symmetric']
+    """
 
     inertia: jax.Array
     rate: jax.Array
@@ -53,5 +59,13 @@ class GravityGradient(BodyInPotential):
 
 
 def gravity_gradient(inertia, rate) -> GravityGradient:
-    """A satellite in the gravity-gradient field, state (m, Γ): V = (3/2) rate² ⟨Γ, IΓ⟩."""
+    """A satellite in the gravity-gradient field, state (m, Γ): V = (3/2) rate² ⟨Γ, IΓ⟩.
+
+    >>> import jax.numpy as jnp, jaxsplit
+    >>> satellite = jaxsplit.gravity_gradient(jnp.array([2.0, 1.0, 2 / 3]), rate=0.1)
+    >>> x0 = (jnp.zeros(3), jnp.array([0.0, 0.6, 0.8]))            # at rest in the body, Γ toward the planet
+    >>> m, gamma = jaxsplit.integrate(jaxsplit.splitting(satellite, "kahan-li-6"), x0, 0.1, 500).final
+    >>> abs(float(gamma @ gamma) - 1) < 1e-13
+    True
+    """
     return GravityGradient(inertia, rate)

@@ -1,0 +1,255 @@
+"""What does a gradient through n steps cost in memory and time, per adjoint?
+
+``integrate(..., adjoint=)`` with ``"store"`` (every step's residuals), ``"checkpoint"``
+(√n blocks) and ``"reversible"`` (states rebuilt by stepping back, fused rotation
+pullbacks) on
+
+* the free body: Strang, Casimir split; gradient with respect to the inertia and m0 (the
+  inertia is traced, so the run keeps the general cos/sin kernel);
+* a heavy top: rotations of (m, Γ) and the gravity kick m ← m + t·w·Γ×χ (Strang on the axes
+  split plus the kick). The Lagrange top (I1 = I2, χ on the symmetry axis: integrable) for
+  agreement and time, one top and 10³ tops at once; an asymmetric top (chaotic) to show
+  what its dynamics do to round-off: its stored gradient itself grows like e^{λt}.
+
+The loss is a weighted sum of the final state; gradients with respect to every parameter
+and the initial state.
+
+* memory: XLA's own account of the compiled gradient (``memory_analysis().temp_size_in_bytes``);
+* time: gradient / forward wall time (median of the per-round ratios, interleaved rounds);
+* agreement: max relative difference from the stored-trajectory gradient.
+
+A last table answers which gradient ``fit`` should use: its model (200 observation
+intervals of 2 Kahan–Li 6 steps each) with the per-interval checkpoint and rolled word it
+uses, against the unrolled word with each adjoint per interval: time per loss gradient and
+compile time.
+
+    python benchmarks/gradients.py [--quick]
+
+Writes ``benchmarks/results/gradients.{md,json}``.
+"""
+
+import argparse
+import statistics
+import time
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import jax.numpy as jnp
+import numpy as np
+from _common import header, interleaved, log, machine_info, write
+
+import jaxsplit
+from jaxsplit.core._adjoints import advance
+from jaxsplit.core._compose import roll
+from jaxsplit.explore._fit_inertia import _body
+
+ADJOINTS = ("store", "checkpoint", "reversible")
+H = 0.01
+WEIGHTS = jnp.arange(1.0, 4.0)
+
+
+class Kick(jaxsplit.AbstractFlow):
+    """m ← m + t·w·Γ×χ: the exact flow of the potential w⟨Γ, χ⟩ of a heavy top (Γ fixed)."""
+
+    chi: jax.Array
+    weight: jax.Array
+
+    def __call__(self, x, t):
+        m, gamma = x
+        return (m + t * self.weight * jnp.cross(gamma, self.chi), gamma)
+
+
+def free_body():
+    args = (jnp.asarray(jaxsplit.STANDARD_CASE.inertia), jnp.asarray(jaxsplit.STANDARD_CASE.m0))
+
+    def loss(adjoint, n):
+        def f(inertia, m):
+            step = jaxsplit.splitting(jaxsplit.RigidBody(inertia), "strang", "casimir", shift=1)
+            return jnp.sum(jaxsplit.integrate(step, m, H, n, adjoint=adjoint).final * WEIGHTS)
+        return f
+
+    return loss, args
+
+
+def heavy_top(inertia, chi, bodies=None):
+    parts = ("momentum", "vector")
+    if bodies is None:
+        x0 = (jnp.array([0.3, -0.2, 1.1]), jnp.array([0.1, 0.2, 0.97]))
+    else:
+        keys = jax.random.split(jax.random.PRNGKey(0))
+        gamma = jax.random.normal(keys[1], (bodies, 3))
+        x0 = (jax.random.normal(keys[0], (bodies, 3)), gamma / jnp.linalg.norm(gamma, axis=1, keepdims=True))
+    args = (jnp.asarray(inertia), jnp.asarray(chi), jnp.asarray(1.5), x0)
+
+    def loss(adjoint, n):
+        def f(inertia, chi, weight, x0):
+            w = 1 / inertia
+            flows = tuple(jaxsplit.AxisRotation(k, w[k], parts) for k in range(3)) + (Kick(chi, weight),)
+            m, gamma = jaxsplit.integrate(jaxsplit.compose(flows, "strang"), x0, H, n, adjoint=adjoint).final
+            return jnp.sum(m * WEIGHTS) + jnp.sum(gamma**3)
+        return f
+
+    return loss, args
+
+
+SYSTEMS = {
+    "free body": free_body,
+    "Lagrange top": lambda: heavy_top([1.0, 1.0, 0.6], [0.0, 0.0, 0.3]),
+    "Lagrange top, 10³ at once": lambda: heavy_top([1.0, 1.0, 0.6], [0.0, 0.0, 0.3], bodies=1000),
+    "asymmetric top (chaotic)": lambda: heavy_top([1.0, 1.2, 0.6], [0.0, 0.05, 0.3]),
+}
+
+
+def relative(a, b):
+    return max(float(jnp.max(jnp.abs(x - y)) / jnp.max(jnp.abs(y)))
+               for x, y in zip(jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b)))
+
+
+def largest(tree):
+    return max(float(jnp.max(jnp.abs(x))) for x in jax.tree_util.tree_leaves(tree))
+
+
+def gradient(loss, adjoint, n, args):
+    return jax.jit(jax.grad(loss(adjoint, n), argnums=tuple(range(len(args)))))
+
+
+def memory_and_agreement(system, counts, run_up_to):
+    loss, args = SYSTEMS[system]()
+    rows = []
+    for n in counts:
+        row = {"system": system, "n_steps": n}
+        grads = {}
+        for adjoint in ADJOINTS:
+            fn = gradient(loss, adjoint, n, args)
+            row[f"{adjoint}_temp_bytes"] = int(fn.lower(*args).compile().memory_analysis().temp_size_in_bytes)
+            if n <= run_up_to:
+                grads[adjoint] = fn(*args)
+        if grads:
+            row["largest_gradient"] = largest(grads["store"])
+            for adjoint in ("checkpoint", "reversible"):
+                row[f"{adjoint}_vs_store"] = relative(grads[adjoint], grads["store"])
+        log(f"{system}, n = {n}: memory {[row[f'{a}_temp_bytes'] for a in ADJOINTS]}")
+        rows.append(row)
+    return rows
+
+
+def time_ratios(system, n, repeats):
+    loss, args = SYSTEMS[system]()
+    forward = jax.jit(loss("store", n))
+    cases = {"forward": lambda: jax.block_until_ready(forward(*args))}
+    for adjoint in ADJOINTS:
+        fn = gradient(loss, adjoint, n, args)
+        jax.block_until_ready(fn(*args))
+        cases[adjoint] = lambda fn=fn: jax.block_until_ready(fn(*args))
+    cases["forward"]()
+    log(f"{system}: timing at {n} steps")
+    times = interleaved(cases, repeats)
+    out = {"system": system, "n_steps": n, "forward_s": statistics.median(times["forward"])}
+    for adjoint in ADJOINTS:
+        out[adjoint] = statistics.median(a / f for a, f in zip(times[adjoint], times["forward"]))
+    return out
+
+
+# ------------------------------------------------------------------ fit's model
+FIT_VARIANTS = ("rolled word, checkpoint per interval (fit today)", "unrolled, checkpoint per interval",
+                "unrolled, store", "unrolled, reversible per interval")
+
+
+def fit_model(variant, n_sub=2, scheme="kahan-li-6"):
+    """fit's predict on the free body: the state after every interval of ``dts``."""
+    def predict(log_inertia, m0, dts):
+        step = jaxsplit.splitting(_body(log_inertia), scheme, "casimir", shift=1)
+        if variant == FIT_VARIANTS[0]:
+            rolled = roll(step)
+
+            @jax.checkpoint
+            def interval(x, dt):
+                x = jax.lax.fori_loop(0, n_sub, lambda _, y: rolled(y, dt / n_sub), x)
+                return x, x
+        elif variant == FIT_VARIANTS[1]:
+            @jax.checkpoint
+            def interval(x, dt):
+                x = step.advance(x, dt / n_sub, n_sub)
+                return x, x
+        else:
+            adjoint = "store" if variant == FIT_VARIANTS[2] else "reversible"
+
+            def interval(x, dt):
+                x = advance(step, x, dt / n_sub, n_sub, adjoint)
+                return x, x
+        return jax.lax.scan(interval, m0, dts)[1]
+
+    return predict
+
+
+def fit_timing(repeats):
+    dts = jnp.asarray(np.diff(np.linspace(0.0, 20.0, 201)))
+    m0 = jnp.asarray(jaxsplit.STANDARD_CASE.m0)
+    log_inertia = jnp.log(jnp.asarray(jaxsplit.STANDARD_CASE.inertia))
+    observed = fit_model(FIT_VARIANTS[2])(log_inertia + 0.01, m0, dts)
+    cases, compile_s, grads = {}, {}, {}
+    for variant in FIT_VARIANTS:
+        predict = fit_model(variant)
+        fn = jax.jit(jax.value_and_grad(lambda li, m, predict=predict: jnp.mean((predict(li, m, dts) - observed) ** 2),
+                                        argnums=(0, 1)))
+        t0 = time.perf_counter()
+        fn.lower(log_inertia, m0).compile()
+        compile_s[variant] = time.perf_counter() - t0
+        grads[variant] = jax.block_until_ready(fn(log_inertia, m0))
+        cases[variant] = lambda fn=fn: jax.block_until_ready(fn(log_inertia, m0))
+    log("fit model: timing")
+    times = interleaved(cases, repeats)
+    base = FIT_VARIANTS[0]
+    return [{"variant": v, "gradient_s": statistics.median(times[v]), "compile_s": compile_s[v],
+             "time_vs_fit_today": statistics.median(a / b for a, b in zip(times[v], times[base])),
+             "vs_fit_today": relative(grads[v], grads[base])} for v in FIT_VARIANTS]
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true")
+    quick = parser.parse_args(argv).quick
+    command = "python benchmarks/gradients.py" + (" --quick" if quick else "")
+    out = machine_info(command)
+    start = time.perf_counter()
+    counts = (1_000, 10_000) if quick else (1_000, 10_000, 100_000, 1_000_000)
+    timed = 10_000 if quick else 100_000
+    repeats = 3 if quick else 5
+    rows = []
+    for system in ("free body", "Lagrange top", "asymmetric top (chaotic)"):
+        rows += memory_and_agreement(system, counts, timed)
+    ratios = [time_ratios(system, timed, repeats) for system in ("free body", "Lagrange top")]
+    ratios.append(time_ratios("Lagrange top, 10³ at once", timed // 100, repeats))
+    fit_rows = fit_timing(3 if quick else 7)
+    out.update(rows=rows, time_vs_forward=ratios, fit=fit_rows)
+
+    lines = header(out, "Gradients through n steps (`benchmarks/gradients.py`)")
+    lines += [("XLA temporary memory of the compiled gradient (MiB); where run, the largest gradient entry and the "
+              "largest relative difference from the stored-trajectory gradient."), "",
+              ("| system | steps | store | checkpoint | reversible | max gradient | checkpoint vs store | "
+              "reversible vs store |"), "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        mib = [f"{r[f'{a}_temp_bytes'] / 2**20:.3g}" for a in ADJOINTS]
+        extra = [f"{r[k]:.1e}" if k in r else "—" for k in ("largest_gradient", "checkpoint_vs_store",
+                                                              "reversible_vs_store")]
+        lines.append(f"| {r['system']} | {r['n_steps']:,} | " + " | ".join(mib + extra) + " |")
+    lines += ["", f"Time of one gradient / one forward run (median of {repeats} interleaved rounds):", "",
+              "| system | steps | forward | store | checkpoint | reversible |", "|---|---|---|---|---|---|"]
+    for r in ratios:
+        lines.append(f"| {r['system']} | {r['n_steps']:,} | {r['forward_s'] * 1e3:.3g} ms | "
+                     + " | ".join(f"{r[a]:.2f}×" for a in ADJOINTS) + " |")
+    lines += ["", ("fit's loss gradient (free body, 200 intervals × 2 Kahan–Li 6 steps, gradient with respect to "
+              "log I and m0):"), "", "| model | per gradient | × fit today | compile | vs fit today |",
+              "|---|---|---|---|---|"]
+    for r in fit_rows:
+        lines.append(f"| {r['variant']} | {r['gradient_s'] * 1e3:.3g} ms | {r['time_vs_fit_today']:.2f} | "
+                     f"{r['compile_s']:.2g} s | {r['vs_fit_today']:.0e} |")
+    out["wall_s"] = time.perf_counter() - start
+    lines += ["", f"Total wall time {out['wall_s']:.0f} s."]
+    write("gradients", quick, out, lines)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,114 @@
+"""The rotation kernel: polynomial cos/sin where the Casimir bounds every angle of a run,
+the general path elsewhere, chosen once per run and visible; batches components-first."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxsplit
+from jaxsplit.systems import so3
+
+KERNEL_ULPS = 2  # polynomial cos, sin vs NumPy's on |θ| <= each limit, in units of eps
+UNIT_CIRCLE_ULPS = 4  # cos² + sin² − 1
+BEYOND_LIMIT_ULPS = 100  # cos² + sin² − 1 at 3× the limit exceeds this (float64): the limit matters
+CASIMIR_TOL = 1e-12  # relative, 1e5 steps
+PATHS_AGREE = 1e-8  # polynomial vs general kernel after 1e5 steps (round-off grows apart)
+ROUNDOFF = 1e-13
+
+STANDARD = jaxsplit.RigidBody(jnp.asarray(jaxsplit.STANDARD_CASE.inertia))
+M0 = jnp.asarray(jaxsplit.STANDARD_CASE.m0)
+
+
+@pytest.mark.parametrize("limit", so3.POLYNOMIAL_LIMITS)
+@pytest.mark.parametrize("dtype", [jnp.float64, jnp.float32])
+def test_polynomial_kernel_is_accurate_to_round_off_within_its_limit(dtype, limit):
+    theta = jnp.linspace(-limit, limit, 20001, dtype=dtype)
+    c, s = (np.asarray(a, np.float64) for a in so3.cos_sin(theta, "polynomial", limit))
+    exact = np.asarray(theta, np.float64)
+    eps = float(jnp.finfo(dtype).eps)
+    assert c.dtype == s.dtype and so3.cos_sin(theta, "polynomial", limit)[0].dtype == dtype
+    assert np.max(np.abs(c - np.cos(exact))) <= KERNEL_ULPS * eps
+    assert np.max(np.abs(s - np.sin(exact))) <= KERNEL_ULPS * eps
+    assert np.max(np.abs(c * c + s * s - 1)) <= UNIT_CIRCLE_ULPS * eps
+    # must fail: beyond its limit the truncated series is no longer a rotation to round-off
+    far = jnp.asarray([3 * limit], dtype=jnp.float64)
+    cf, sf = so3.cos_sin(far, "polynomial", limit)
+    assert abs(float(cf[0] ** 2 + sf[0] ** 2) - 1) > BEYOND_LIMIT_ULPS * float(jnp.finfo(jnp.float64).eps)
+
+
+def test_the_run_picks_the_kernel_from_the_casimir_bound():
+    step = jaxsplit.splitting(STANDARD, "kahan-li-6", "casimir")
+    assert step.kernel == "general"  # as built
+    fast = step.for_run(M0, 0.1)  # |c| |m0| reach h = 0.5 · 1 · 0.8 · 0.1
+    assert fast.kernel == "polynomial" and "kernel='polynomial'" in repr(fast)
+    assert step.for_run(M0, 10.0).kernel == "general"  # angles up to ~4 rad: the general path
+    # the truncation covers the run's bound, and smaller steps get fewer terms
+    m_norm = float(jnp.linalg.norm(M0))
+    for h in (0.01, 0.1, 1.0):
+        run = step.for_run(M0, h)
+        for flow, reach in zip(run.flows, step.reach()):
+            assert flow.angle_limit >= abs(float(flow.rate)) * m_norm * reach * h
+    terms = [len(so3._taylor("float64", step.for_run(M0, h).flows[0].angle_limit)[0]) for h in (0.01, 1.0)]
+    assert terms[0] < terms[1]
+    assert jaxsplit.integrate(step, M0, 0.1, 10).kernel == "polynomial"
+    assert jaxsplit.integrate(step, M0, 10.0, 10).kernel == "general"
+    # under the caller's jit the values are traced: the general path (specialise beforehand
+    # with step.for_run to keep the polynomial one)
+    assert jax.jit(lambda m: jaxsplit.integrate(step, m, 0.1, 3))(M0).kernel == "general"
+    assert jax.jit(lambda m: jaxsplit.integrate(fast, m, 0.1, 3))(M0).kernel == "polynomial"
+    # a flow that changes |m| leaves no bound: every flow stays general
+    kick = jaxsplit.FunctionFlow(lambda m, t: m * (1 + t))
+    assert jaxsplit.compose(STANDARD.split("casimir") + (kick,), "strang").for_run(M0, 0.1).kernel == "general"
+
+
+def test_the_polynomial_path_has_no_sine_or_cosine():
+    step = jaxsplit.splitting(STANDARD, "strang", "casimir")
+
+    def hlo(s):
+        return jax.jit(lambda m: jaxsplit.integrate(s, m, 0.1, 5).final).lower(M0).as_text()
+
+    assert "sine" in hlo(step) and "cosine" in hlo(step)
+    fast = hlo(step.for_run(M0, 0.1))
+    assert "sine" not in fast and "cosine" not in fast
+
+
+def test_structure_and_accuracy_are_those_of_the_general_path():
+    """Casimir to round-off over 1e5 steps on the polynomial path; the same trajectory as the
+    general path up to round-off growth."""
+    step = jaxsplit.splitting(STANDARD, "kahan-li-6", "casimir")
+    fast = jaxsplit.integrate(step, M0, 0.1, 100_000, save_every=10_000)
+    assert fast.kernel == "polynomial"
+    general = jax.jit(lambda m: jaxsplit.integrate(step, m, 0.1, 100_000, save_every=10_000).x)(M0)
+    c = jnp.sum(fast.x**2, axis=1)
+    assert float(jnp.max(jnp.abs(c / c[0] - 1))) <= CASIMIR_TOL
+    assert float(jnp.max(jnp.abs(fast.x - general))) <= PATHS_AGREE
+    # the order ladders of the checks run the polynomial kernel where the bound allows
+    order = jaxsplit.estimate_order(jaxsplit.splitting(STANDARD, "strang", "casimir"), M0, 10.0,
+                                    jaxsplit.ladder(200), jnp.asarray(jaxsplit.STANDARD_CASE.reference))
+    assert abs(order.order - 2) <= 0.3
+
+
+def test_a_batch_runs_components_first_and_matches_single_states():
+    states = jax.random.normal(jax.random.PRNGKey(3), (5, 3))
+    step = jaxsplit.splitting(STANDARD, "strang", "casimir")
+    fast = step.for_run(states, 0.05)
+    assert fast.structure_of_arrays and fast.kernel == "polynomial"
+    assert not step.for_run(M0, 0.05).structure_of_arrays  # one state: nothing to lay out
+    batch = jaxsplit.integrate(step, states, 0.05, 200, save_every=50)
+    assert batch.x.shape == (5, 5, 3)
+    for b in range(5):
+        one = jaxsplit.integrate(step, states[b], 0.05, 200, save_every=50).x
+        np.testing.assert_allclose(batch.x[:, b], one, atol=ROUNDOFF)
+    # jax.vmap of the step keeps working (the general path, inside vmap)
+    mapped = jax.vmap(lambda m: jaxsplit.integrate(step, m, 0.05, 200).final)(states)
+    np.testing.assert_allclose(mapped, batch.final, atol=ROUNDOFF)
+    # and the one-step call of a components-first composition takes (..., 3) states
+    np.testing.assert_allclose(fast(states, 0.05), step(states, 0.05), atol=ROUNDOFF)
+
+
+def test_a_bad_kernel_name_or_limit_is_refused():
+    with pytest.raises(jaxsplit.InputError, match="kernel must be one of"):
+        jaxsplit.AxisRotation(0, 1.0, kernel="fast")
+    with pytest.raises(jaxsplit.InputError, match="angle_limit must be one of"):
+        jaxsplit.AxisRotation(0, 1.0, kernel="polynomial", angle_limit=2.0)
