@@ -1,6 +1,8 @@
 """The composer and the scan stepper: reference errors, reversibility, merging, dtypes,
 no recompilation, jit/vmap/grad, saving, backward runs, generic PyTree states."""
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -11,6 +13,7 @@ from jaxsplit import InputError, RigidBody
 
 REVERSIBILITY_TOL = 1e-14
 MERGE_TOL = 1e-12
+MERGE_H, MERGE_STEPS = 0.05, 1000
 ROUNDOFF = 1e-13
 ACCUMULATED_ROUNDOFF = 1e-12  # 2 x 500 steps x 34 rotations
 TABLE_RTOL = 0.05  # the reference table prints two significant digits
@@ -78,13 +81,40 @@ def test_rotation_counts_after_merging():
     assert len(jaxsplit.splitting(STANDARD, "strang", merge_flows=False).word) == 6
 
 
+def rolled_registry(split, merge_flows=None, symmetric_only=False):
+    """Every scheme allowed on ``split`` as one rolled family: (names, flows, pieces, weights),
+    the words padded to one length, so that a check over the whole registry is ONE compilation
+    (``jax.vmap`` over the stacked words) instead of one per scheme."""
+    names = [n for n, s in SPLITS if s == split and (jaxsplit.schemes[n].symmetric or not symmetric_only)]
+    comps = [jaxsplit.splitting(STANDARD, n, split, merge_flows=merge_flows) for n in names]
+    length = max(len(c.word) for c in comps)
+    rolled = [jaxsplit.roll(c, length) for c in comps]
+    flows = rolled[0].flows
+    assert all(jax.tree_util.tree_structure(r.flows) == jax.tree_util.tree_structure(flows) for r in rolled)
+    return names, flows, jnp.stack([r.pieces for r in rolled]), jnp.stack([r.weights for r in rolled])
+
+
+@functools.cache
+def reversal_errors(split):
+    """{scheme: worst |step(step(m, h), -h) - m|} over 16 states and h in (1e-3, 0.1, 1), for
+    every symmetric scheme allowed on ``split``: the schemes' merged words (exactly the
+    sub-flows ``splitting`` applies), rolled, all schemes in one compilation."""
+    names, flows, pieces, weights = rolled_registry(split, symmetric_only=True)
+    states = random_unit_states(16)
+
+    @jax.jit
+    @jax.vmap
+    def worst(pieces, weights):
+        step = jaxsplit.RolledComposition(flows, pieces, weights)
+        return jnp.max(jnp.stack([jnp.abs(jax.vmap(lambda m, h=h: step(step(m, h), -h))(states) - states).max()
+                                  for h in (1e-3, 0.1, 1.0)]))
+
+    return dict(zip(names, np.asarray(worst(pieces, weights))))
+
+
 @pytest.mark.parametrize("name, split", [s for s in SPLITS if jaxsplit.schemes[s[0]].symmetric])
 def test_symmetric_schemes_are_time_reversible(name, split):
-    step = jaxsplit.splitting(STANDARD, name, split)
-    states = random_unit_states(16)
-    for h in (1e-3, 0.1, 1.0):
-        back = jax.vmap(lambda m, h=h: step(step(m, h), -h))(states)
-        assert np.abs(back - states).max() <= REVERSIBILITY_TOL
+    assert reversal_errors(split)[name] <= REVERSIBILITY_TOL
 
 
 def test_lie_trotter_is_not_reversible_but_its_adjoint_inverts_it():
@@ -95,13 +125,23 @@ def test_lie_trotter_is_not_reversible_but_its_adjoint_inverts_it():
     assert np.abs(adjoint(lie(m, 0.1), -0.1) - m).max() <= REVERSIBILITY_TOL
 
 
+@functools.cache
+def unmerged_finals(split, n_steps=MERGE_STEPS):
+    """{scheme: final state} of every scheme allowed on ``split`` with its sub-flows as written
+    (``merge_flows=False``): the reference, rolled, all schemes in one compilation."""
+    names, flows, pieces, weights = rolled_registry(split, merge_flows=False)
+    run = jax.jit(jax.vmap(lambda p, w: jaxsplit.integrate(
+        jaxsplit.RolledComposition(flows, p, w), M0, MERGE_H, n_steps).final))
+    return dict(zip(names, np.asarray(run(pieces, weights))))
+
+
 @pytest.mark.parametrize("name, split", SPLITS)
 def test_merged_and_unmerged_compositions_agree(name, split):
+    """The merged composition as users run it (unrolled, merged across steps by ``advance``)
+    against the scheme's sub-flows as written."""
     merged = jaxsplit.splitting(STANDARD, name, split)
-    unmerged = jaxsplit.splitting(STANDARD, name, split, merge_flows=False)
-    a = jaxsplit.integrate(merged, M0, 0.05, 1000).final
-    b = jaxsplit.integrate(unmerged, M0, 0.05, 1000).final
-    assert np.abs(a - b).max() <= MERGE_TOL
+    a = jaxsplit.integrate(merged, M0, MERGE_H, MERGE_STEPS).final
+    assert np.abs(a - unmerged_finals(split)[name]).max() <= MERGE_TOL
 
 
 @pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64])

@@ -63,7 +63,9 @@ def test_fit_recovers_a_user_systems_parameters():
         return CarriedVector(jnp.exp(log_inertia))
 
     observed = jaxsplit.simulate(family, np.log(truth), x0, t, noise=1e-4, seed=5)
-    res = jaxsplit.fit(family, t, observed, np.log(np.array([1.0, 2.0, 3.0])), max_step=0.1)
+    # L-BFGS alone (no Adam warm-up): the same optimum, measured: largest relative error 1.1e-5,
+    # 0.495 standard deviations, sigma 4% low, with or without the 50 Adam steps
+    res = jaxsplit.fit(family, t, observed, np.log(np.array([1.0, 2.0, 3.0])), max_step=0.1, adam_steps=0)
     np.testing.assert_allclose(np.exp(res.params), truth, rtol=FIT_RTOL)
     assert np.all(np.abs(np.exp(res.params) - truth) < 5 * truth * res.params_std + 1e-12)
     assert abs(res.noise_sigma / 1e-4 - 1) < 0.3

@@ -35,8 +35,9 @@ def test_published_five_stage_tables_are_in_the_family(name):
 @pytest.fixture(scope="module")
 def tuned():
     inertias, states = jaxsplit.random_bodies(24, seed=1)
+    # converged at 100 iterations: held-out ratio learned/best 0.692 at 100 and at 300 (limit 0.8)
     return jaxsplit.tune_scheme(inertias, states, stages=7, t_end=T_END, n_steps=TUNED_STEPS,
-                                iterations=300, learning_rate=0.05)
+                                iterations=100, learning_rate=0.05)
 
 
 def test_learned_method_has_order_four(tuned):
