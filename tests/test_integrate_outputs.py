@@ -13,7 +13,7 @@ CASIMIR_TOL = 1e-13  # relative, states at output times (partial steps are Poiss
 ACCURACY_FACTOR = 1.5  # error at output times vs the grid's own error (same scheme, same h)
 GRADIENT_RTOL = 1e-8  # reversible vs stored gradient, 1e5 steps (round-off of the rebuilt states)
 FD_RTOL = 1e-6
-FLOAT32_DRIFT_SEEN = 1e-4  # Kahan-Li 6, axes, 1e5 float32 steps: measured 6.9e-4
+FLOAT32_DRIFT_SEEN = 1e-5  # Kahan-Li 6, axes, 1e5 float32 steps: measured 6.1e-5 (6.9e-4 before the unbiased rotations)
 FLOAT32_PROJECTED = 1e-6  # |m| projected back each step: float32 round-off (6e-8) only
 
 BODY = jaxsplit.RigidBody(jnp.asarray(jaxsplit.PAPER_BODY))  # symmetric: exact solution known
@@ -27,7 +27,8 @@ def test_one_result_type():
     plain = jaxsplit.integrate(step, SM0, 0.1, 100)
     saved = jaxsplit.integrate(step, SM0, 0.1, 100, save_every=30)
     assert isinstance(plain, jaxsplit.Solution) and isinstance(saved, jaxsplit.Solution)
-    np.testing.assert_array_equal(plain.final, saved.final)
+    # the same steps; saving splits the scan in blocks, which XLA may fuse differently (an ulp)
+    np.testing.assert_allclose(plain.final, saved.final, rtol=0, atol=4 * np.finfo(np.float64).eps)
     np.testing.assert_array_equal(plain.x[0], SM0)
     np.testing.assert_allclose(plain.t, [0.0, 10.0], atol=1e-12)
     np.testing.assert_allclose(saved.t, [0.0, 3.0, 6.0, 9.0, 10.0], atol=1e-12)
