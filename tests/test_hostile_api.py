@@ -128,11 +128,12 @@ def test_bad_systems_and_splits_are_refused(build, words):
     _refused(build, *words)
 
 
-@pytest.mark.xfail(strict=True, raises=ValueError, reason="systems/so3: a flow's rate is not checked against the "
-                   "state's batch shape (a (4, 3) body with a (3,) state): raw ValueError")
 def test_a_batched_concrete_body_with_one_state_is_refused():
     body = RigidBody(jnp.ones((4, 3)) * jnp.array([2.0, 1.0, 0.5]))
-    _refused(lambda: integrate(splitting(body, "strang", split="axes"), M0, 0.1, 3).final, "inertia")
+    _refused(lambda: integrate(splitting(body, "strang", split="axes"), M0, 0.1, 3).final, "inertia", "(4,)")
+    _refused(lambda: integrate(splitting(body, "strang", split="casimir", shift=1), M0, 0.1, 3).final, "inertia")
+    batch = jnp.broadcast_to(M0, (4, 3))  # one state per body: integrates
+    assert integrate(splitting(body, "strang", split="axes"), batch, 0.1, 3).final.shape == (4, 3)
 
 
 def test_a_wrongly_shaped_body_inside_jit_is_refused():

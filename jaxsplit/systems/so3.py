@@ -335,8 +335,11 @@ class AbstractRotation(AbstractFlow):
         if self.components_first:
             if tuple(state.shape[:1]) != (3,):
                 raise InputError(f"a components-first state needs shape (3, ...), got {tuple(state.shape)}")
-            return state
-        return momentum(state, self.parts)
+            m = state
+        else:
+            m = momentum(state, self.parts)
+        _check_batch(jnp.shape(self.rate), m.shape[1:] if self.components_first else m.shape[:-1])
+        return m
 
     def for_run(self, x0, t, step):
         """This rotation with the fastest kernel for one run of ``step`` from ``x0`` with
@@ -354,6 +357,19 @@ class AbstractRotation(AbstractFlow):
         first = (m is not None and self.parts is None and all(isinstance(f, AxisRotation) for f in flows)
                  and m.ndim >= 2)
         return dataclasses.replace(self, kernel=kernel, angle_limit=limit, components_first=bool(first))
+
+
+def _check_batch(parameter_shape, state_batch):
+    """A batched body (leading axes on its parameters) needs states with those axes: the state
+    is never silently broadcast to several bodies (shapes are static: checked under jit too)."""
+    try:
+        fits = np.broadcast_shapes(tuple(parameter_shape), tuple(state_batch)) == tuple(state_batch)
+    except ValueError:
+        fits = False
+    if not fits:
+        raise InputError(f"the body's inertia (a rotation's rate) has batch shape {tuple(parameter_shape)} but the "
+                         f"state's batch shape is {tuple(state_batch)}: give one state per body, shape "
+                         f"{tuple(parameter_shape) + (3,)}, or vmap over the bodies")
 
 
 def _momentum_or_none(x0, parts):
