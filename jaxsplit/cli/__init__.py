@@ -10,8 +10,10 @@ in float64.
 Shared pieces, one concept each: ``_args`` (argument types), ``_bounds`` (every size a
 user controls), ``_io`` (the one writer: resolved, locked, atomic outputs), ``_metadata``
 (what a run records; JSON on stdout), ``_signals`` (the signal policy), ``_progress`` (the
-progress bar), ``_chunked`` (long runs in chunks), ``_problem`` (body, state, scheme and
-split), ``_figures`` (simulate's figure).
+progress bar), ``_chunked`` (long runs in chunks), ``_problem`` (system, state, scheme and
+split), ``_diagnostics`` (invariant errors, the exact solution), ``_data`` (the one
+trajectory format, npz and csv: what simulate writes and fit reads), ``_figures`` (simulate's
+and sweep's figures). ``python -m jaxsplit`` runs the same ``main``.
 """
 
 import argparse
@@ -23,14 +25,15 @@ from . import _args, _signals
 
 COMMANDS = ("simulate", "schemes", "check", "sweep", "fit", "paper")
 
-DESCRIPTION = ("jaxsplit: structure-preserving (Poisson / symplectic) splitting integrators for the "
-               "free rigid body, in JAX.")
+DESCRIPTION = ("jaxsplit: structure-preserving (Poisson / symplectic) splitting integrators for rigid "
+               "bodies (free, with attitude, heavy top, gravity gradient), in JAX.")
 
 EPILOG = """\
 examples:
   jaxsplit simulate                       # the paper's symmetric body with Lie-Trotter
   jaxsplit schemes
   jaxsplit check --scheme kahan-li-6 --split casimir
+  jaxsplit simulate --system heavy-top --t-end 20 --save-every 20 --out top.npz && jaxsplit fit --data top.npz
   jaxsplit COMMAND --help                 # options and examples of each command
 
 exit status: 0 success; 1 `check` found a failed check; 2 bad input (one line on stderr,
