@@ -40,7 +40,7 @@ def _expand(path: str) -> list[str]:
 
 
 def _exists(path: str, base: Path) -> bool:
-    path = path.split("#")[0].split("::")[0].rstrip("/")
+    path = re.sub(r"<[^<>/]+>", "*", path.split("#")[0].split("::")[0].rstrip("/"))  # results/<script>.md
     if "{" in path:
         return all(_exists(p, base) for p in _expand(path))
     if base == ROOT / "docs" and path in _site_pages():
