@@ -18,6 +18,10 @@ and the initial state.
 * time: gradient / forward wall time (median of the per-round ratios, interleaved rounds);
 * agreement: max relative difference from the stored-trajectory gradient.
 
+A profile splits the heavy top's backward pass by kind of flow (rotations of m alone,
+rotations of (m, Γ), one rotation and the kick): time per step of the forward run and of
+the backward pass (gradient minus forward).
+
 A last table answers which gradient ``fit`` should use: its model (200 observation
 intervals of 2 Kahan–Li 6 steps each) with the per-interval checkpoint and rolled word it
 uses, against the unrolled word with each adjoint per interval: time per loss gradient and
@@ -152,6 +156,41 @@ def time_ratios(system, n, repeats):
     return out
 
 
+# ------------------------------------------------------------------ profile of the top
+PROFILE = {"3 rotations of m (axes split)": ("m", 3, False), "3 rotations of (m, Γ)": ("m, Γ", 3, False),
+           "1 rotation of (m, Γ) and the kick": ("m, Γ", 1, True), "3 rotations of (m, Γ) and the kick (the top)":
+           ("m, Γ", 3, True)}
+
+
+def profile(n, repeats):
+    """Forward and backward time per step of Strang over the given flows, one top."""
+    x0 = (jnp.array([0.3, -0.2, 1.1]), jnp.array([0.1, 0.2, 0.97]))
+    args = (jnp.array([1.0, 1.0, 0.6]), jnp.array([0.0, 0.0, 0.3]), jnp.asarray(1.5))
+    cases = {}
+    for name, (state, rotations, kick) in PROFILE.items():
+        def loss(inertia, chi, weight, x, adjoint, state=state, rotations=rotations, kick=kick):
+            parts = None if state == "m" else ("momentum", "vector")
+            flows = tuple(jaxsplit.AxisRotation(k, 1 / inertia[k], parts) for k in range(rotations))
+            flows += (Kick(chi, weight),) if kick else ()
+            y = jaxsplit.integrate(jaxsplit.compose(flows, "strang"), x if parts else x[0], H, n, adjoint=adjoint).final
+            return sum(jnp.sum(leaf * WEIGHTS) for leaf in jax.tree_util.tree_leaves(y))
+
+        forward = jax.jit(lambda *a, loss=loss: loss(*a, "store"))
+        backward = jax.jit(jax.grad(lambda *a, loss=loss: loss(*a, "reversible"), argnums=(0, 1, 2, 3)))
+        for key, fn in (("forward", forward), ("gradient", backward)):
+            jax.block_until_ready(fn(*args, x0))
+            cases[name, key] = lambda fn=fn: jax.block_until_ready(fn(*args, x0))
+    log("profile of the top: timing")
+    times = interleaved(cases, repeats)
+    rows = []
+    for name in PROFILE:
+        f, g = statistics.median(times[name, "forward"]), statistics.median(times[name, "gradient"])
+        rows.append({"flows": name, "forward_ns_per_step": f / n * 1e9, "backward_ns_per_step": (g - f) / n * 1e9,
+                     "gradient_vs_forward": statistics.median(
+                         a / b for a, b in zip(times[name, "gradient"], times[name, "forward"]))})
+    return rows
+
+
 # ------------------------------------------------------------------ fit's model
 FIT_VARIANTS = ("rolled word, checkpoint per interval (fit today)", "unrolled, checkpoint per interval",
                 "unrolled, store", "unrolled, reversible per interval")
@@ -222,8 +261,9 @@ def main(argv=None):
         rows += memory_and_agreement(system, counts, timed)
     ratios = [time_ratios(system, timed, repeats) for system in ("free body", "Lagrange top")]
     ratios.append(time_ratios("Lagrange top, 10³ at once", timed // 100, repeats))
+    profile_rows = profile(timed, repeats)
     fit_rows = fit_timing(3 if quick else 7)
-    out.update(rows=rows, time_vs_forward=ratios, fit=fit_rows)
+    out.update(rows=rows, time_vs_forward=ratios, profile=profile_rows, fit=fit_rows)
 
     lines = header(out, "Gradients through n steps (`benchmarks/gradients.py`)")
     lines += [("XLA temporary memory of the compiled gradient (MiB); where run, the largest gradient entry and the "
@@ -240,6 +280,11 @@ def main(argv=None):
     for r in ratios:
         lines.append(f"| {r['system']} | {r['n_steps']:,} | {r['forward_s'] * 1e3:.3g} ms | "
                      + " | ".join(f"{r[a]:.2f}×" for a in ADJOINTS) + " |")
+    lines += ["", (f"Profile of one top, Strang over the flows named, {timed:,} steps (ns per step; backward = gradient "
+              "− forward):"), "", "| flows | forward | backward | gradient / forward |", "|---|---|---|---|"]
+    for r in profile_rows:
+        lines.append(f"| {r['flows']} | {r['forward_ns_per_step']:.0f} | {r['backward_ns_per_step']:.0f} | "
+                     f"{r['gradient_vs_forward']:.2f}× |")
     lines += ["", ("fit's loss gradient (free body, 200 intervals × 2 Kahan–Li 6 steps, gradient with respect to "
               "log I and m0):"), "", "| model | per gradient | × fit today | compile | vs fit today |",
               "|---|---|---|---|---|"]
