@@ -281,6 +281,9 @@ FIT_CSV = {
     "gamma-partial": ("t,m1,m2,m3,gamma1,gamma2\n" + "".join(r.strip() + ",0,1\n" for r in _ROWS.splitlines()),
                       ["--system heavy-top needs gamma (n, 3)"]),
     "binary": (b"\x00\xff\xfe garbage", ["not a readable .csv file", "UnicodeDecodeError"]),
+    "satellite": ('# metadata: {"system": "gravity-gradient"}\n# t,m1,m2,m3,gamma1,gamma2,gamma3\n'
+                  + "".join(r.strip() + ",0,0,1\n" for r in _ROWS.splitlines()),
+                  ["holds a gravity-gradient run", "--system rigid-body"]),
 }
 
 

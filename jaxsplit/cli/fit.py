@@ -116,9 +116,19 @@ def load_observations(path: str):
 # --------------------------------------------------------------------------- run
 
 
+MODELS = {"rigid-body": "rigid-body", "attitude": "rigid-body", "heavy-top": "heavy-top"}  # file's system -> model
+
+
 def run(args):
     t, states, energy, inertia1, meta = load_observations(args.data)
+    written_by = meta.get("system")
+    if args.system == "auto" and written_by is not None and written_by not in MODELS:
+        raise InputError(f"{args.data} holds a {written_by} run; fit models the free body and the heavy top (give "
+                         "--system rigid-body to fit its m(t) as a free body's)")
     system = args.system if args.system != "auto" else ("heavy-top" if "gamma" in states else "rigid-body")
+    if written_by == "attitude" and system == "rigid-body":
+        print("jaxsplit: note: the file's attitude Q is not used: m(t) determines what the fit can know",
+              file=sys.stderr)
     scheme = _bounds.scheme(args.scheme)
     if len(t) >= 2 and np.all(np.diff(t) > 0):  # else the library names the problem
         _bounds.at_most((len(t) - 1) * substeps(t, args.max_step), MAX_MODEL_STEPS,
