@@ -13,8 +13,9 @@ CASIMIR_TOL = 1e-13  # relative, states at output times (partial steps are Poiss
 ACCURACY_FACTOR = 1.5  # error at output times vs the grid's own error (same scheme, same h)
 GRADIENT_RTOL = 1e-8  # reversible vs stored gradient, 1e5 steps (round-off of the rebuilt states)
 FD_RTOL = 1e-6
-FLOAT32_DRIFT_SEEN = 1e-5  # Kahan-Li 6, axes, 1e5 float32 steps: measured 6.1e-5 (6.9e-4 before the unbiased rotations)
-FLOAT32_PROJECTED = 1e-6  # |m| projected back each step: float32 round-off (6e-8) only
+FLOAT32_DRIFT_SEEN = 1e-5  # Kahan-Li 6, axes, 2e4 float32 steps, largest of 16-64 states: measured 3e-5 to 7e-5
+FLOAT32_PROJECTED = 1e-6  # |m| projected back each step: float32 round-off (3e-7) only
+FLOAT32_ENERGY_RATIO = 1.5  # median energy error projected / plain, 64 states: measured 0.50 to 0.83 (6 seeds)
 
 BODY = jaxsplit.RigidBody(jnp.asarray(jaxsplit.PAPER_BODY))  # symmetric: exact solution known
 M0 = jnp.asarray(jaxsplit.PAPER_M0)
@@ -145,22 +146,25 @@ def test_reversible_adjoint_is_refused_where_it_is_wrong():
 
 
 def test_float32_casimir_drift_and_the_opt_in_projection():
-    """float32 round-off drifts |m| over 10⁵ steps of a high-order scheme; Renormalized
-    projects it back (a projection, reported as such) without losing accuracy."""
+    """float32 round-off drifts |m| over 2e4 steps of a high-order scheme; Renormalized projects
+    it back (a projection, reported as such) and leaves the energy error no worse. Measured on an
+    ensemble of 64 states (one state's float32 errors are a coin toss: CI's rounding differs)."""
     body32 = jaxsplit.RigidBody(jnp.asarray(jaxsplit.STANDARD_CASE.inertia, dtype=jnp.float32))
-    m32 = SM0.astype(jnp.float32)
+    m = np.random.default_rng(0).normal(size=(64, 3))
+    m32 = jnp.asarray(m / np.linalg.norm(m, axis=1, keepdims=True), dtype=jnp.float32)
     step = jaxsplit.splitting(body32, "kahan-li-6", "axes")
-    projected = jaxsplit.Renormalized(step, jnp.linalg.norm(m32))
-    reference = jaxsplit.integrate(jaxsplit.splitting(STANDARD, "kahan-li-6", "axes"), SM0, 0.1, 100_000,
-                                   save_every=10_000).x
-    drift = {}
+    projected = jaxsplit.Renormalized(step, jnp.linalg.norm(m32, axis=-1))
+    drift, energy = {}, {}
     for name, s in (("plain", step), ("projected", projected)):
-        sol = jaxsplit.integrate(s, m32, 0.1, 100_000, save_every=10_000)
-        c = jnp.sum(sol.x.astype(jnp.float64) ** 2, axis=1)
-        drift[name] = float(jnp.max(jnp.abs(c / c[0] - 1)))
-        drift[name + " error"] = float(jnp.max(jnp.abs(sol.x - reference)))
+        sol = jaxsplit.integrate(s, m32, 0.1, 20_000, save_every=2_000)
         assert sol.x.dtype == jnp.float32
+        x = sol.x.astype(jnp.float64)
+        c, h = jnp.sum(x**2, axis=-1), STANDARD.hamiltonian(x)
+        drift[name] = float(jnp.max(jnp.abs(c / c[0] - 1)))
+        energy[name] = float(jnp.median(jnp.max(jnp.abs(h / h[0] - 1), axis=0)))
     assert drift["plain"] >= FLOAT32_DRIFT_SEEN  # the drift exists and is measured
     assert drift["projected"] <= FLOAT32_PROJECTED
-    assert drift["projected error"] <= 1.5 * drift["plain error"]
+    assert energy["projected"] <= FLOAT32_ENERGY_RATIO * energy["plain"]
+    with pytest.raises(InputError, match="does not fit states of batch shape"):  # (16, 1) would broadcast
+        jaxsplit.integrate(jaxsplit.Renormalized(step, jnp.linalg.norm(m32, axis=-1, keepdims=True)), m32, 0.1, 2)
     assert projected.scheme.name == "kahan-li-6" and not projected.is_group
