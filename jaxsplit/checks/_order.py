@@ -1,8 +1,9 @@
 """Empirical convergence order: global errors over a ladder of step counts, log-log fit.
 
-``global_errors`` compiles ONE integration for the whole ladder: every step size runs the
-largest step count under ``vmap`` with every state saved, and the state at ``t_end`` is
-picked for each (a new step count would otherwise mean a new compilation).
+``global_errors`` compiles ONE integration for the whole ladder: every step size (traced) runs
+the largest step count with every state saved, and the state at ``t_end`` is picked for each
+(a new step count would otherwise mean a new compilation). The step sizes run in a loop, not
+under ``vmap``: batching an unrolled high-order scheme costs more to trace than the runs cost.
 ``fit_order`` fits log(error) = p log(h) + c over the points in the asymptotic regime:
 error inside a fixed window (above round-off, below the pre-asymptotic regime) and,
 optionally, step sizes below ``max_step`` (for compositions with large weights the
@@ -88,9 +89,8 @@ def global_errors(step, x0, t_end: float, counts, reference):
     hs = jnp.asarray(t_end / counts, dtype=float_dtype(x0))
     if isinstance(step, Composition):
         step = step.for_run(x0, float(np.max(np.abs(np.asarray(hs)))))  # the kernel for the largest step
-    saved = jax.vmap(lambda h: integrate(step, x0, h, int(counts[-1]), save_every=1).x)(hs)
-    rows = jnp.arange(len(counts))
-    finals = jax.tree_util.tree_map(lambda a: a[rows, counts], saved)
+    runs = [integrate(step, x0, h, int(counts[-1]), save_every=1).x for h in hs]
+    finals = jax.tree_util.tree_map(lambda *a: jnp.stack([r[n] for r, n in zip(a, counts)]), *runs)
     diffs = jax.tree_util.tree_map(lambda a, r: jnp.abs(a - r).reshape(len(counts), -1), finals, reference)
     floating = [d for d, a in zip(jax.tree_util.tree_leaves(diffs), jax.tree_util.tree_leaves(finals))
                 if is_floating(a)]  # integer leaves ride along: not errors
