@@ -78,6 +78,7 @@ class Solution(eqx.Module):
 Trajectory = Solution  # the former name of the saved-states result
 
 
+MAX_GRID_STEPS = 2**31 - 1  # output times: the grid step before each time, an int32 index
 MAX_COUNT = 2**53  # counts become the float times k*h: exact up to 2^53 (and beyond any run's reach)
 
 
@@ -199,6 +200,11 @@ def _output_times(ts, t0, h):
     if np.any(ahead < 0):
         raise InputError(f"ts must be ordered in the direction of h (h = {float(np.asarray(h)):g}) and start at or "
                          f"after t0 = {float(np.asarray(t0)):g}; got first time {arr[0]:g}")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        steps = np.abs((arr[-1] - float(np.asarray(t0))) / float(np.asarray(h)))
+    if not steps <= MAX_GRID_STEPS:  # the grid index is an int32 (it must also run without x64)
+        raise InputError(f"ts reaches {arr[-1]:g}, {steps:.3g} steps of h = {float(np.asarray(h)):g} from t0: at most "
+                         f"2^31 - 1 steps are allowed; use a larger h or split the run")
     return ts
 
 
