@@ -89,7 +89,8 @@ def global_errors(step, x0, t_end: float, counts, reference):
     hs = jnp.asarray(t_end / counts, dtype=float_dtype(x0))
     if isinstance(step, Composition):
         step = step.for_run(x0, float(np.max(np.abs(np.asarray(hs)))))  # the kernel for the largest step
-    runs = [integrate(step, x0, h, int(counts[-1]), save_every=1).x for h in hs]
+    run = jax.jit(lambda h: integrate(step, x0, h, int(counts[-1]), save_every=1).x)  # h traced: one kernel
+    runs = [run(h) for h in hs]
     finals = jax.tree_util.tree_map(lambda *a: jnp.stack([r[n] for r, n in zip(a, counts)]), *runs)
     diffs = jax.tree_util.tree_map(lambda a, r: jnp.abs(a - r).reshape(len(counts), -1), finals, reference)
     floating = [d for d, a in zip(jax.tree_util.tree_leaves(diffs), jax.tree_util.tree_leaves(finals))
