@@ -10,6 +10,7 @@ optionally, step sizes below ``max_step`` (for compositions with large weights t
 asymptotic regime is set by the largest sub-step |w| h, not by the error).
 """
 
+import functools
 from typing import NamedTuple
 
 import jax
@@ -18,6 +19,7 @@ import numpy as np
 
 from ..core._compose import Composition
 from ..core._errors import InputError
+from ..core._flows import join_parameters, split_parameters
 from ..core._integrate import integrate
 from ..core._state import as_state, float_dtype, is_floating
 
@@ -89,14 +91,22 @@ def global_errors(step, x0, t_end: float, counts, reference):
     hs = jnp.asarray(t_end / counts, dtype=float_dtype(x0))
     if isinstance(step, Composition):
         step = step.for_run(x0, float(np.max(np.abs(np.asarray(hs)))))  # the kernel for the largest step
-    run = jax.jit(lambda h: integrate(step, x0, h, int(counts[-1]), save_every=1).x)  # h traced: one kernel
-    runs = [run(h) for h in hs]
+    parameters, static = split_parameters(step)
+    runs = [_saved_run(parameters, static, x0, h, int(counts[-1])) for h in hs]
     finals = jax.tree_util.tree_map(lambda *a: jnp.stack([r[n] for r, n in zip(a, counts)]), *runs)
     diffs = jax.tree_util.tree_map(lambda a, r: jnp.abs(a - r).reshape(len(counts), -1), finals, reference)
     floating = [d for d, a in zip(jax.tree_util.tree_leaves(diffs), jax.tree_util.tree_leaves(finals))
                 if is_floating(a)]  # integer leaves ride along: not errors
     errors = jnp.max(jnp.concatenate(floating, axis=1), axis=1)
     return np.asarray(hs), np.asarray(errors)
+
+
+@functools.partial(jax.jit, static_argnames=("static", "n_steps"))
+def _saved_run(parameters, static, x0, h, n_steps: int):
+    """Every state of ``n_steps`` steps; ``h`` is traced here, so the step keeps the kernel it was
+    given (the largest step's) and one compilation serves the ladder, and any other ladder of
+    the same scheme, kernel and length (body and state are traced too)."""
+    return integrate(join_parameters(parameters, static), x0, h, n_steps, save_every=1).x
 
 
 def ladder(start: int, factor: float = 16.0, points: int = 12):
