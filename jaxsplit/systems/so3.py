@@ -123,15 +123,15 @@ def _evaluated_once(c, s):
     """(c, s) unchanged, but computed in a kernel of their own, once per angle.
 
     Why: XLA's CPU fusion puts cos and sin inside every elementwise kernel that consumes them
-    and evaluates them again for each element it writes (a rotation of m writes 2 turned
-    components, the reversible adjoint's stacked step back 8 per angle): 10³ heavy tops,
-    general kernel, 160 ns per body and rotation instead of 40 (profiled).
-    An ``optimization_barrier`` does not prevent it; a reduction is never fused into its
-    elementwise consumers, so the pair goes through an exact one: a sum from −0.0 with a row of
-    −0.0 (x + (−0.0) = x for every x, −0.0 and NaN included; ``jnp.sum`` starts from +0.0). Only for XLA's cos and sin of a
-    batch: a scalar angle's are hoisted out of the element loop, and re-evaluating the
-    polynomial kernel costs less than the extra pass (free body, 4096 states: 1.5× slower
-    with it; XLA's cos and sin 1.5× faster).
+    and evaluates them again for each element it writes (2 per rotated vector and angle;
+    the reversible adjoint turns the state and its cotangent): 10³ heavy tops, 4 vectors
+    turned per angle, 160 ns per body and rotation instead of 40 (profiled). An
+    ``optimization_barrier`` does not prevent it; a reduction is never fused into its
+    elementwise consumers, so the pair goes through an exact one: a sum from −0.0 with a row
+    of −0.0 (x + (−0.0) = x for every x, −0.0 and NaN included; ``jnp.sum`` starts from +0.0).
+    Only for XLA's cos and sin of a batch: a scalar angle's are hoisted out of the element
+    loop, and re-evaluating the polynomial kernel costs less than the extra pass (free body,
+    4096 states: 1.5× slower with it, while XLA's cos and sin run 1.5× faster with it).
     """
     pair = jnp.stack([c, s])
     negative_zero = jnp.asarray(-0.0, pair.dtype)
@@ -466,46 +466,35 @@ class AxisRotation(AbstractRotation):
         rate = self.rate.astype(m.dtype)
         c, s = half_cos_sin(rate * m_k * t, self.kernel, self.angle_limit)
 
-        parts = ("momentum",) if self.parts is None else self.parts
-        leaves, cts = ((x_after,), (ct_after,)) if self.parts is None else (tuple(x_after), tuple(ct_after))
-        # Every part that turns like m, and its cotangent, turned as one stacked array: XLA
-        # fuses one kernel per output array, and each kernel evaluates cos and sin anew.
-        along_m = [q for q, part in enumerate(parts) if part in ("momentum", "vector") and leaves[q].shape == m.shape]
-        rows = [q for q, part in enumerate(parts) if part in ("vector", "attitude") and q not in along_m]
-        stack_axis = 1 if first else 0
-        stacked = jnp.stack([leaves[q] for q in along_m] + [cts[q] for q in along_m], axis=stack_axis)
+        def back(v, extra):
+            return _turn_axis(v, k, _expand(c, extra), -_expand(s, extra), first)
 
-        half = len(along_m)
-        g = _stacked_torque(stacked, half, i, j, first)
-        for q in rows:  # vectors of another shape, attitude rows (summed over the rows)
-            v, ct_v = leaves[q], cts[q]
-            torque = _component(ct_v, i) * _component(v, j) - _component(ct_v, j) * _component(v, i)
-            g = g + (jnp.sum(torque, axis=-1) if parts[q] == "attitude" else torque)
-        along = g * rate * t  # θ = rate·m_k·t depends on m_k: added to m's cotangent, component k
-        at = half + along_m.index(parts.index("momentum"))  # m's cotangent in the stack
-        at_m = (jnp.arange(2 * half) == at).reshape((-1,) + (1,) * jnp.ndim(along))
-        turned = _add_to_component(_turn_axis(stacked, k, c, -s, first), k, jnp.where(at_m, along, 0.0), first)
-        x, ct = list(leaves), list(cts)
-        for n, q in enumerate(along_m):
-            x[q] = jnp.take(turned, n, axis=stack_axis)
-            ct[q] = jnp.take(turned, half + n, axis=stack_axis)
-        for q in rows:
-            extra = int(parts[q] == "attitude")
-            x[q] = _turn_axis(leaves[q], k, _expand(c, extra), -_expand(s, extra), first)
-            ct[q] = _turn_axis(cts[q], k, _expand(c, extra), -_expand(s, extra), first)
+        def torque(v, ct, extra):
+            g = _component(ct, i, first) * _component(v, j, first) - _component(ct, j, first) * _component(v, i, first)
+            return jnp.sum(g, axis=-1) if extra else g
+
         if self.parts is None:
-            x, ct = x[0], ct[0]
+            x, ct, g = back(x_after, 0), back(ct_after, 0), torque(x_after, ct_after, 0)
         else:
+            x, ct, g = [], [], 0.0
+            for part, leaf, ct_leaf in zip(self.parts, x_after, ct_after):
+                if part in ("momentum", "vector", "attitude"):
+                    extra = int(part == "attitude")
+                    x.append(back(leaf, extra))
+                    ct.append(back(ct_leaf, extra))
+                    g = g + torque(leaf, ct_leaf, extra)
+                else:
+                    x.append(leaf)
+                    ct.append(ct_leaf)
+        along = g * rate * t  # θ = rate·m_k·t depends on m_k
+        if self.parts is None:
+            ct = _add_to_component(ct, k, along, first)
+        else:
+            at = self.parts.index("momentum")
+            ct[at] = _add_to_component(ct[at], k, along, False)
             rebuild = type(x_after)._make if hasattr(x_after, "_fields") else tuple
             x, ct = rebuild(x), rebuild(ct)
         return x, ct, [_sum_to_shape(g * m_k * t, self.rate.shape)], jnp.sum(g * rate * m_k)
-
-
-def _stacked_torque(stacked, half: int, i: int, j: int, first: bool):
-    """Σ ct_i x_j − ct_j x_i over the pairs of a stack whose first ``half`` entries are states
-    and the rest their cotangents (the stack's axis comes first once a component is taken)."""
-    xi, xj = _component(stacked, i, first), _component(stacked, j, first)
-    return sum(xi[half + q] * xj[q] - xj[half + q] * xi[q] for q in range(half))
 
 
 def _add_to_component(v, k: int, value, first: bool):
