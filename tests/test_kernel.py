@@ -135,3 +135,16 @@ def test_a_batch_of_general_angles_is_xla_cos_and_sin_bit_for_bit_evaluated_once
     # must fail: the same count sees cos inside the turning kernel without the reduction
     plain = lambda a: so3._turn_axis(jnp.ones((4,) + a.shape + (3,)), 2, jnp.cos(a / 2), jnp.sin(a / 2))
     assert cosines_in_turning_kernels(plain, angle) > 0
+
+
+@pytest.mark.parametrize("limit", so3.POLYNOMIAL_LIMITS)
+def test_the_half_angle_is_truncated_for_half_the_limit_at_full_accuracy(limit):
+    theta = jnp.linspace(-limit, limit, 20001)
+    c, s = (np.asarray(a) for a in so3.half_cos_sin(theta, "polynomial", limit))
+    eps = float(jnp.finfo(jnp.float64).eps)
+    assert np.max(np.abs(c - np.cos(np.asarray(theta) / 2))) <= KERNEL_ULPS * eps
+    assert np.max(np.abs(s - np.sin(np.asarray(theta) / 2))) <= KERNEL_ULPS * eps
+    assert len(so3._taylor("float64", limit / 2)[0]) < len(so3._taylor("float64", limit)[0])  # fewer terms
+    # must fail: the half-limit truncation used on the full angle is no longer round-off
+    cf, sf = (np.asarray(a) for a in so3.cos_sin(jnp.asarray([limit]), "polynomial", limit / 4))
+    assert abs(float(cf[0] ** 2 + sf[0] ** 2) - 1) > BEYOND_LIMIT_ULPS * eps

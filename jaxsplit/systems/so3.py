@@ -33,7 +33,8 @@ reduction, truncated where the next term at |θ| = L is below a quarter of the d
 epsilon (accurate to round-off: measured ≤ 0.5 ulp, cos² + sin² − 1 ≤ 2 ulp, in
 ``tests/test_kernel.py``). The smaller the bound, the fewer the terms (float64: 11 terms
 for L = 1/8, 19 for L = 1), so L is the smallest of ``POLYNOMIAL_LIMITS`` above the run's
-bound (``angle_limit``). The map is the same exact rotation; only its trigonometry is
+bound (``angle_limit``); a rotation evaluates the half angle (``half_cos_sin``), so its
+polynomial is truncated for L/2. The map is the same exact rotation; only its trigonometry is
 evaluated differently. ``for_run`` selects the kernel once per run from the initial state
 (``Composition.for_run``, called by ``integrate``); the ``"general"`` kernel is used
 otherwise. For a batch of free-body states a run also moves the components first
@@ -140,8 +141,9 @@ def _evaluated_once(c, s):
 
 
 def half_cos_sin(angle, kernel: str = "general", limit: float = POLYNOMIAL_LIMIT):
-    """(cos θ/2, sin θ/2) (by ``cos_sin``'s ``kernel``: |θ/2| <= |θ| <= ``limit`` keeps the
-    polynomial in range): every rotation by θ is applied from these, as an increment.
+    """(cos θ/2, sin θ/2) (by ``cos_sin``'s ``kernel``; for |θ| <= ``limit`` the polynomial is
+    truncated for |θ/2| <= ``limit``/2: fewer terms, the same accuracy): every rotation by θ is
+    applied from these, as an increment.
 
     Why: a rounded pair (cos θ, sin θ) has cos² + sin² = 1 + δ with |δ| ~ ε, and the same δ
     every step when the angle is set by a conserved quantity (m_3 of a symmetric body, |m| of a
@@ -149,7 +151,7 @@ def half_cos_sin(angle, kernel: str = "general", limit: float = POLYNOMIAL_LIMIT
     = 2 sin²(θ/2), sin θ = 2 sin(θ/2) cos(θ/2)), the map's defect is 4 sin²(θ/2) δ = O(θ² ε) and
     the rest of the rounding is a random walk.
     """
-    return cos_sin(angle / 2, kernel, limit)
+    return cos_sin(angle / 2, kernel, limit / 2)
 
 
 def rotation_matrix(axis: int, angle):
