@@ -22,7 +22,8 @@ RESULTS = Path(__file__).resolve().parent / "results"
 # How tables and plots name the registry's schemes: author, order (the registry's names are kebab-case keys).
 SCHEME_LABELS = {"strang": "Strang (order 2)", "blanes-moan-s6-prk": "Blanes–Moan S6 partitioned (order 4)",
                  "kahan-li-6": "Kahan–Li (order 6)", "kahan-li-8": "Kahan–Li (order 8)",
-                 "kahan-li-10": "Kahan–Li (order 10)", "sofroniou-spaletta-10": "Sofroniou–Spaletta (order 10)"}
+                 "kahan-li-10": "Kahan–Li (order 10)", "mclachlan-ss15": "McLachlan SS15 (order 8)",
+                 "mclachlan-ss17": "McLachlan SS17 (order 8)", "sofroniou-spaletta-10": "Sofroniou–Spaletta (order 10)"}
 
 
 def scheme_label(name: str) -> str:

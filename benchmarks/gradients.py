@@ -54,17 +54,6 @@ H = 0.01
 WEIGHTS = jnp.arange(1.0, 4.0)
 
 
-class Kick(jaxsplit.AbstractFlow):
-    """m ← m + t·w·Γ×χ: the exact flow of the potential w⟨Γ, χ⟩ of a heavy top (Γ fixed)."""
-
-    chi: jax.Array
-    weight: jax.Array
-
-    def __call__(self, x, t):
-        m, gamma = x
-        return (m + t * self.weight * jnp.cross(gamma, self.chi), gamma)
-
-
 def free_body():
     args = (jnp.asarray(jaxsplit.STANDARD_CASE.inertia), jnp.asarray(jaxsplit.STANDARD_CASE.m0))
 
@@ -78,7 +67,6 @@ def free_body():
 
 
 def heavy_top(inertia, chi, bodies=None):
-    parts = ("momentum", "vector")
     if bodies is None:
         x0 = (jnp.array([0.3, -0.2, 1.1]), jnp.array([0.1, 0.2, 0.97]))
     else:
@@ -89,9 +77,8 @@ def heavy_top(inertia, chi, bodies=None):
 
     def loss(adjoint, n):
         def f(inertia, chi, weight, x0):
-            w = 1 / inertia
-            flows = tuple(jaxsplit.AxisRotation(k, w[k], parts) for k in range(3)) + (Kick(chi, weight),)
-            m, gamma = jaxsplit.integrate(jaxsplit.compose(flows, "strang"), x0, H, n, adjoint=adjoint).final
+            step = jaxsplit.splitting(jaxsplit.heavy_top(inertia, chi, weight), "strang")  # axes split
+            m, gamma = jaxsplit.integrate(step, x0, H, n, adjoint=adjoint).final
             return jnp.sum(m * WEIGHTS) + jnp.sum(gamma**3)
         return f
 
@@ -171,7 +158,7 @@ def profile(n, repeats):
         def loss(inertia, chi, weight, x, adjoint, state=state, rotations=rotations, kick=kick):
             parts = None if state == "m" else ("momentum", "vector")
             flows = tuple(jaxsplit.AxisRotation(k, 1 / inertia[k], parts) for k in range(rotations))
-            flows += (Kick(chi, weight),) if kick else ()
+            flows += (jaxsplit.heavy_top(inertia, chi, weight).kick(),) if kick else ()
             y = jaxsplit.integrate(jaxsplit.compose(flows, "strang"), x if parts else x[0], H, n, adjoint=adjoint).final
             return sum(jnp.sum(leaf * WEIGHTS) for leaf in jax.tree_util.tree_leaves(y))
 

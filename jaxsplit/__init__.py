@@ -67,6 +67,7 @@ if typing.TYPE_CHECKING:
     from .core._compose import roll as roll
     from .core._errors import InputError as InputError
     from .core._flows import AbstractFlow as AbstractFlow
+    from .core._flows import AbstractKick as AbstractKick
     from .core._flows import FunctionFlow as FunctionFlow
     from .core._flows import Renormalized as Renormalized
     from .core._flows import Substeps as Substeps

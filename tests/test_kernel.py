@@ -112,3 +112,39 @@ def test_a_bad_kernel_name_or_limit_is_refused():
         jaxsplit.AxisRotation(0, 1.0, kernel="fast")
     with pytest.raises(jaxsplit.InputError, match="angle_limit must be one of"):
         jaxsplit.AxisRotation(0, 1.0, kernel="polynomial", angle_limit=2.0)
+
+
+def test_a_batch_of_general_angles_is_xla_cos_and_sin_bit_for_bit_evaluated_once():
+    """The exact reduction that keeps XLA from re-evaluating cos and sin per element written
+    changes no bit (−0.0 and NaN included) and leaves one cos and one sin per angle."""
+    theta = jnp.array([0.3, -0.0, 0.0, 2.5, -7.0, jnp.nan, jnp.inf])
+    once = jax.jit(so3.cos_sin)(theta)
+    plain = jax.jit(lambda a: (jnp.cos(a), jnp.sin(a)))(theta)
+    for a, b in zip(once, plain):
+        np.testing.assert_array_equal(np.asarray(a).view(np.int64), np.asarray(b).view(np.int64))
+
+    def turned(angle):  # a rotation of 4 stacked vectors: 8 elements written per angle
+        return so3._turn_axis(jnp.ones((4,) + angle.shape + (3,)), 2, *so3.half_cos_sin(angle))
+
+    def cosines_in_turning_kernels(fn, angle):  # kernels that write the (4, B, 3) result
+        kernels = jax.jit(fn).lower(angle).compile().as_text().split("\n\n")
+        return sum(k.count(" cosine(") for k in kernels if f"f64[4,{angle.shape[0]},3]" in k)
+
+    angle = jnp.linspace(0.1, 0.2, 16)
+    assert cosines_in_turning_kernels(turned, angle) == 0
+    # must fail: the same count sees cos inside the turning kernel without the reduction
+    plain = lambda a: so3._turn_axis(jnp.ones((4,) + a.shape + (3,)), 2, jnp.cos(a / 2), jnp.sin(a / 2))
+    assert cosines_in_turning_kernels(plain, angle) > 0
+
+
+@pytest.mark.parametrize("limit", so3.POLYNOMIAL_LIMITS)
+def test_the_half_angle_is_truncated_for_half_the_limit_at_full_accuracy(limit):
+    theta = jnp.linspace(-limit, limit, 20001)
+    c, s = (np.asarray(a) for a in so3.half_cos_sin(theta, "polynomial", limit))
+    eps = float(jnp.finfo(jnp.float64).eps)
+    assert np.max(np.abs(c - np.cos(np.asarray(theta) / 2))) <= KERNEL_ULPS * eps
+    assert np.max(np.abs(s - np.sin(np.asarray(theta) / 2))) <= KERNEL_ULPS * eps
+    assert len(so3._taylor("float64", limit / 2)[0]) < len(so3._taylor("float64", limit)[0])  # fewer terms
+    # must fail: the half-limit truncation used on the full angle is no longer round-off
+    cf, sf = (np.asarray(a) for a in so3.cos_sin(jnp.asarray([limit]), "polynomial", limit / 4))
+    assert abs(float(cf[0] ** 2 + sf[0] ** 2) - 1) > BEYOND_LIMIT_ULPS * eps

@@ -13,6 +13,7 @@ from ._compose import compose as compose
 from ._compose import roll as roll
 from ._errors import InputError as InputError
 from ._flows import AbstractFlow as AbstractFlow
+from ._flows import AbstractKick as AbstractKick
 from ._flows import FunctionFlow as FunctionFlow
 from ._flows import Renormalized as Renormalized
 from ._flows import Substeps as Substeps

@@ -10,8 +10,9 @@
   stepping back from the last one instead of storing it (a ``jax.custom_vjp``): memory
   independent of n. ``Composition.retrace`` walks the applied sub-flows backwards, each
   flow's ``step_back`` giving the state before it and the pulled-back cotangent in one
-  pass (a rotation fuses both and shares its cos and sin; other flows use ``jax.vjp`` of
-  one call). The scheme need not be symmetric: the word is inverted sub-flow by sub-flow.
+  pass (a rotation fuses both and shares its cos and sin; a kick (``AbstractKick``) steps
+  back by x − t·v and pulls back with one ``jax.vjp`` of its velocity; other flows use
+  ``jax.vjp`` of one call). The scheme need not be symmetric: the word is inverted sub-flow by sub-flow.
   The rebuilt states differ from the forward ones by accumulated round-off only (measured
   in the tests and benchmarks). Forward-mode differentiation is not available through it.
 

@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..core._errors import InputError
-from ..core._flows import AbstractFlow
+from ..core._flows import AbstractKick
 from ._base import AbstractSystem
 from ._rigid_body import is_concrete
 from ._spin import Commuting, MomentumSpin
@@ -40,17 +40,20 @@ from .so3 import AxisRotation, check_shape, hat
 PARTS = ("momentum", "vector")
 
 
-class PotentialKick(AbstractFlow):
-    """Exact flow of a potential V(Γ) on the state (m, Γ): m ← m + t Γ × ∇V(Γ), Γ fixed.
+class PotentialKick(AbstractKick):
+    """Exact flow of a potential V(Γ) on the state (m, Γ): m ← m + t Γ × ∇V(Γ), Γ fixed (a kick:
+    the reversible adjoint steps it back with one ``jax.vjp`` of the torque).
 
     ``potential`` is a function Γ -> V (a system's bound method: its parameters stay traced)."""
 
     potential: Callable
 
-    def __call__(self, state, t):
-        m, gamma = check_shape(state[0], "momentum"), check_shape(state[1], "vector")
+    def velocity(self, state):
+        """(the torque Γ × ∇V(Γ), None: Γ does not move)."""
+        check_shape(state[0], "momentum")
+        gamma = check_shape(state[1], "vector")
         force = jax.grad(lambda g: jnp.sum(self.potential(g)))(gamma)
-        return (m + t * jnp.cross(gamma, force), gamma)
+        return jnp.cross(gamma, force), None
 
 
 class BodyInPotential(AbstractSystem):

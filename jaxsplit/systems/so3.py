@@ -33,7 +33,8 @@ reduction, truncated where the next term at |θ| = L is below a quarter of the d
 epsilon (accurate to round-off: measured ≤ 0.5 ulp, cos² + sin² − 1 ≤ 2 ulp, in
 ``tests/test_kernel.py``). The smaller the bound, the fewer the terms (float64: 11 terms
 for L = 1/8, 19 for L = 1), so L is the smallest of ``POLYNOMIAL_LIMITS`` above the run's
-bound (``angle_limit``). The map is the same exact rotation; only its trigonometry is
+bound (``angle_limit``); a rotation evaluates the half angle (``half_cos_sin``), so its
+polynomial is truncated for L/2. The map is the same exact rotation; only its trigonometry is
 evaluated differently. ``for_run`` selects the kernel once per run from the initial state
 (``Composition.for_run``, called by ``integrate``); the ``"general"`` kernel is used
 otherwise. For a batch of free-body states a run also moves the components first
@@ -110,17 +111,39 @@ def cos_sin(angle, kernel: str = "general", limit: float = POLYNOMIAL_LIMIT):
     only (the caller guarantees it), Taylor polynomials in the shared θ² truncated for that
     bound, accurate to round-off there (see the module docstring).
     """
+    angle = jnp.asarray(angle)
     if kernel == "polynomial":
-        angle = jnp.asarray(angle)
         cos_c, sin_c = _taylor(np.dtype(angle.dtype).name, float(limit))
         square = angle * angle
         return _horner(cos_c, square), angle * _horner(sin_c, square)
-    return jnp.cos(angle), jnp.sin(angle)
+    pair = jnp.cos(angle), jnp.sin(angle)
+    return _evaluated_once(*pair) if angle.ndim else pair
+
+
+def _evaluated_once(c, s):
+    """(c, s) unchanged, but computed in a kernel of their own, once per angle.
+
+    Why: XLA's CPU fusion puts cos and sin inside every elementwise kernel that consumes them
+    and evaluates them again for each element it writes (2 per rotated vector and angle;
+    the reversible adjoint turns the state and its cotangent): 10³ heavy tops, 4 vectors
+    turned per angle, 160 ns per body and rotation instead of 40 (profiled). An
+    ``optimization_barrier`` does not prevent it; a reduction is never fused into its
+    elementwise consumers, so the pair goes through an exact one: a sum from −0.0 with a row
+    of −0.0 (x + (−0.0) = x for every x, −0.0 and NaN included; ``jnp.sum`` starts from +0.0).
+    Only for XLA's cos and sin of a batch: a scalar angle's are hoisted out of the element
+    loop, and re-evaluating the polynomial kernel costs less than the extra pass (free body,
+    4096 states: 1.5× slower with it, while XLA's cos and sin run 1.5× faster with it).
+    """
+    pair = jnp.stack([c, s])
+    negative_zero = jnp.asarray(-0.0, pair.dtype)
+    pair = jax.lax.reduce(jnp.stack([pair, jnp.full_like(pair, -0.0)]), negative_zero, jax.lax.add, (0,))
+    return pair[0], pair[1]
 
 
 def half_cos_sin(angle, kernel: str = "general", limit: float = POLYNOMIAL_LIMIT):
-    """(cos θ/2, sin θ/2) (by ``cos_sin``'s ``kernel``: |θ/2| <= |θ| <= ``limit`` keeps the
-    polynomial in range): every rotation by θ is applied from these, as an increment.
+    """(cos θ/2, sin θ/2) (by ``cos_sin``'s ``kernel``; for |θ| <= ``limit`` the polynomial is
+    truncated for |θ/2| <= ``limit``/2: fewer terms, the same accuracy): every rotation by θ is
+    applied from these, as an increment.
 
     Why: a rounded pair (cos θ, sin θ) has cos² + sin² = 1 + δ with |δ| ~ ε, and the same δ
     every step when the angle is set by a conserved quantity (m_3 of a symmetric body, |m| of a
@@ -128,7 +151,7 @@ def half_cos_sin(angle, kernel: str = "general", limit: float = POLYNOMIAL_LIMIT
     = 2 sin²(θ/2), sin θ = 2 sin(θ/2) cos(θ/2)), the map's defect is 4 sin²(θ/2) δ = O(θ² ε) and
     the rest of the rounding is a random walk.
     """
-    return cos_sin(angle / 2, kernel, limit)
+    return cos_sin(angle / 2, kernel, limit / 2)
 
 
 def rotation_matrix(axis: int, angle):
