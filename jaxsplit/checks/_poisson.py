@@ -90,9 +90,10 @@ def poisson_defect(step: Callable, poisson_matrix: Callable, x, h):
     x = _state(x)
     pi = _poisson_fn(poisson_matrix)
     flat, phi, unravel = _flat_map(step, x, h)
-    jac = jax.jacfwd(phi)(flat)
     n = flat.shape[0]
-    lhs = jac @ _square(pi(x), n, "at x") @ jac.T
+    pi_x = _square(pi(x), n, "at x")  # before the Jacobian: a batch of states is refused at once
+    jac = jax.jacfwd(phi)(flat)
+    lhs = jac @ pi_x @ jac.T
     return jnp.max(jnp.abs(lhs - _square(pi(unravel(phi(flat))), n, "at Φ(x)")))
 
 
