@@ -173,7 +173,7 @@ def attitude(inertia, quaternion: bool = False) -> Attitude:
     >>> import jax.numpy as jnp, jaxsplit
     >>> body = jaxsplit.attitude(jnp.array([2.0, 1.0, 2 / 3]))
     >>> x0 = (jnp.array([0.4, -0.3, 0.8]), jnp.eye(3))
-    >>> m, Q = jaxsplit.integrate(jaxsplit.splitting(body, "kahan-li-6"), x0, 0.05, 200).final
+    >>> m, Q = jaxsplit.integrate(jaxsplit.splitting(body, "strang"), x0, 0.05, 200).final
     >>> float(jnp.max(jnp.abs(Q @ m - x0[0]))) < 1e-13, float(jnp.max(jnp.abs(Q.T @ Q - jnp.eye(3)))) < 1e-13
     (True, True)
     """
