@@ -18,7 +18,8 @@ REFERENCE = jnp.asarray(CASE.reference)  # 30 digits at t = 10
 
 
 def _error(choice, x0, h, n, reference):
-    return float(jnp.max(jnp.abs(jaxsplit.integrate(choice.step, x0, h, n).final - reference)))
+    """The chosen step, rolled (the same map; its word as arrays compiles in a fraction of the time)."""
+    return float(jnp.max(jnp.abs(jaxsplit.integrate(jaxsplit.roll(choice.step), x0, h, n).final - reference)))
 
 
 @pytest.mark.parametrize("tol", [1e-6, 1e-10])
@@ -40,7 +41,7 @@ def test_a_long_horizon_batch_on_a_near_symmetric_body():
     body = jaxsplit.RigidBody(jnp.asarray([1.0, 1.01, 0.5]))
     states = jnp.asarray(jaxsplit.random_bodies(4, seed=5)[1])
     choice = jaxsplit.auto_splitting(body, states, tol=1e-8, t_end=100.0)
-    fine = jaxsplit.splitting(body, "kahan-li-10", "casimir", shift=0)
+    fine = jaxsplit.roll(jaxsplit.splitting(body, "kahan-li-10", "casimir", shift=0))
     reference = jaxsplit.integrate(fine, states, 100.0 / 20_000, 20_000).final
     assert _error(choice, states, choice.h, choice.n_steps, reference) <= SAFETY * 1e-8
 

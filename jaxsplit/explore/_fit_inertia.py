@@ -203,6 +203,22 @@ def _curvature(params, obs, dts, log_i1, config):
     return jac, jnp.sum(r * r), jax.jacfwd(full)(jnp.concatenate([log_i1[None], params["log_i23"]]))
 
 
+@functools.partial(jax.jit, static_argnames=("fit_m0", "by_energy"))
+def _gauge(params, log_i1, obs, energy, inertia1, fit_m0: bool, by_energy: bool):
+    """The gauge map flat params -> (ratios, differences, 1/I under the gauge), with its Jacobians
+    in the params and in the energy: one compiled program (op by op it compiled dozens)."""
+    flat, unravel = jax.flatten_util.ravel_pytree(params)
+
+    def gauge_map(f, e):
+        log_inertia, m0 = _unpack(unravel(f), log_i1, obs, fit_m0)
+        w = jnp.exp(-log_inertia)
+        c = _gauge_shift(w, m0, e if by_energy else None, inertia1)
+        wg = w + c
+        return jnp.concatenate([jnp.stack([wg[0] / wg[1], wg[0] / wg[2]]), (w - w[2])[:2], wg])
+
+    return gauge_map(flat, energy), jax.jacfwd(gauge_map, 0)(flat, energy), jax.jacfwd(gauge_map, 1)(flat, energy)
+
+
 def fit_inertia(t, m, *, energy: float | None = None, energy_sigma: float = 0.0,
                 inertia1: float | None = None, fit_m0: bool = True, scheme="kahan-li-6",
                 max_step: float = 0.05, adam_steps: int = 50, adam_lr: float = 3e-4,
@@ -256,7 +272,6 @@ def fit_inertia(t, m, *, energy: float | None = None, energy_sigma: float = 0.0,
     params, iters, final = _optimise(params, obs, dts, log_i1, config)
 
     # Gauss–Newton Hessian of the identifiable problem, and of the full log-inertia one.
-    flat, unravel = jax.flatten_util.ravel_pytree(params)
     jac, rss, jfull = (np.asarray(a) for a in _curvature(params, obs, dts, log_i1, config))
     n_res, n_par = jac.shape
     sigma2 = float(rss) / max(n_res - n_par, 1)
@@ -265,23 +280,11 @@ def fit_inertia(t, m, *, energy: float | None = None, energy_sigma: float = 0.0,
     evals, evecs = np.linalg.eigh(jfull.T @ jfull)
     null = evecs[:, 0] * np.sign(evecs[:, 0].sum() or 1.0)
 
-    def unpack(p):
-        return _unpack(p, log_i1, obs, fit_m0)
-
     # Gauge map (flat params, energy) -> (ratios, differences), with its Jacobian.
-    e_val = 0.0 if energy is None else float(energy)
-
-    def gauge_map(f, e):
-        log_inertia, m0 = unpack(unravel(f))
-        w = jnp.exp(-log_inertia)
-        c = _gauge_shift(w, m0, e if energy is not None else None, inertia1)
-        wg = w + c
-        return jnp.concatenate([jnp.stack([wg[0] / wg[1], wg[0] / wg[2]]), (w - w[2])[:2], wg])
-
-    e_arr = jnp.asarray(e_val, dtype)
-    out = np.asarray(gauge_map(flat, e_arr))
-    jg = np.asarray(jax.jacfwd(gauge_map, argnums=0)(flat, e_arr))
-    je = np.asarray(jax.jacfwd(gauge_map, argnums=1)(flat, e_arr))
+    e_arr = jnp.asarray(0.0 if energy is None else float(energy), dtype)
+    i1_arr = jnp.asarray(1.0 if inertia1 is None else float(inertia1), dtype)
+    out, jg, je = (np.asarray(a) for a in _gauge(params, log_i1, obs, e_arr, i1_arr, fit_m0=bool(fit_m0),
+                                                 by_energy=energy is not None))
     var = np.einsum("ij,jk,ik->i", jg, cov, jg) + je**2 * energy_sigma**2
     wg = out[4:]
     if np.any(wg <= 0):

@@ -28,7 +28,7 @@ from ..core._errors import InputError
 from ..core._schemes import schemes
 from ..core._state import ravel
 from ..systems._splitting import splitting
-from ._batch import build, family_of, resolved_groups, take
+from ._batch import build, compiled, family_of, resolved_groups, take
 
 STABILITY_TOL = 1e-9  # spectral radius above 1 + this counts as unstable
 
@@ -45,22 +45,29 @@ def _kernel(family, scheme, split, options: tuple, rank: int, equilibria):
     def one(h, params):
         system = family(params)
         step = roll(splitting(system, scheme, split, **options))
-        out = []
-        for x in _equilibrium_list(system, equilibria):
+
+        def at(x):
             flat, unravel = ravel(x)
             hh = jnp.asarray(h, flat.dtype)
-            jac = jax.jacfwd(lambda v, u=unravel, hh=hh: ravel(step(u(v), hh))[0])(flat)
-            field = jax.jacfwd(lambda v, u=unravel: ravel(system.vector_field(u(v)))[0])(flat)
+            jac = jax.jacfwd(lambda v: ravel(step(unravel(v), hh))[0])(flat)
+            field = jax.jacfwd(lambda v: ravel(system.vector_field(unravel(v)))[0])(flat)
             u, v = _leaf_basis(system.poisson_matrix(x), rank)
             fixed = jnp.max(jnp.abs(ravel(step(x, hh))[0] - flat))
-            out.append((u.T @ jac @ u, v.T @ jac @ v, u.T @ field @ u, fixed))
-        return tuple(jnp.stack(r) for r in zip(*out))
+            return u.T @ jac @ u, v.T @ jac @ v, u.T @ field @ u, fixed
 
-    return jax.jit(jax.vmap(jax.vmap(one, in_axes=(None, 0)), in_axes=(0, None)))
+        # every equilibrium through one traced program (a loop over them traced it once each)
+        return jax.vmap(at)(_equilibria(system, equilibria))
+
+    return jax.vmap(jax.vmap(one, in_axes=(None, 0)), in_axes=(0, None))
+
+
+def _equilibria(system, equilibria):
+    """The equilibria as one PyTree with a leading axis E."""
+    return system.equilibria() if equilibria is None else equilibria(system)
 
 
 def _equilibrium_list(system, equilibria):
-    xs = system.equilibria() if equilibria is None else equilibria(system)
+    xs = _equilibria(system, equilibria)
     count = len(jax.tree_util.tree_leaves(xs)[0])
     return [take(xs, k) for k in range(count)]
 
@@ -118,7 +125,9 @@ def stability_map(scheme, step_sizes, params, *, system=None, split: str | None 
 
     blocks = None
     for name, opts, idx in resolved_groups(family, params, split, split_options):
-        fn = _kernel(family, scheme, name, tuple(sorted(opts.items())), rank, equilibria)
+        key = tuple(sorted(opts.items()))
+        fn = compiled(("stability", family, scheme, name, key, rank, equilibria),  # a later map reuses it
+                      lambda name=name, key=key: _kernel(family, scheme, name, key, rank, equilibria), None)
         part = [np.asarray(r) for r in fn(jnp.asarray(h), take(params, idx))]
         if blocks is None:
             blocks = [np.empty((len(h), n_params) + p.shape[2:], p.dtype) for p in part]

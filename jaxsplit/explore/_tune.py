@@ -168,7 +168,11 @@ def tune_scheme(params, states, *, system=None, stages: int = 5, t_end: float = 
             z0 = jnp.asarray(scan_z[best:best + 1], dtype)
 
     opt = optax.adam(learning_rate)
-    value_and_grad = jax.value_and_grad(objective)
+    # forward mode: z holds a few parameters, and a jvp per parameter compiles far faster than
+    # the reverse pass through the step loop
+    def value_and_grad(z):
+        g, v = jax.jacfwd(lambda z: (objective(z), objective(z)), has_aux=True)(z)
+        return v, g
 
     @jax.jit
     def run(z):
