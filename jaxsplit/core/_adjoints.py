@@ -1,7 +1,10 @@
 """How ``n`` steps are advanced, and what reverse mode stores: the three adjoints.
 
-* ``"store"`` (default): a ``lax.scan``; reverse mode keeps every step's residuals, memory
-  O(n), the fastest gradient while it fits.
+* ``"store"`` (default): a ``lax.scan``; reverse mode keeps every step's state, memory
+  O(n), the fastest gradient while it fits. A ``Composition`` rematerialises its step from
+  the stored state (``jax.checkpoint`` per step): stacking every intermediate instead made
+  XLA re-evaluate the step once per stacked residual (free body: 90× the forward run, now
+  2.5×; ``benchmarks/results/gradients.md``). Other steps keep their residuals.
 * ``"checkpoint"``: blocks of B = ⌈√n⌉ steps under ``jax.checkpoint``; reverse mode stores one
   state per block and recomputes a block at a time: memory O(n/B + B) = O(√n), about one
   extra forward run of cost.
