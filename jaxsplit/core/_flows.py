@@ -15,9 +15,9 @@ from typing import Any
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from ._errors import InputError
+from ._state import fits_batch
 
 
 def _is_parameter(leaf) -> bool:
@@ -208,7 +208,6 @@ class Substeps(AbstractFlow):
     n: int = eqx.field(static=True)
 
     def __check_init__(self):
-
         if isinstance(self.n, bool) or not isinstance(self.n, int) or self.n < 1:
             raise InputError(f"Substeps needs an integer n >= 1, got {self.n!r}")
 
@@ -267,11 +266,7 @@ def _rescale(norm, x):
         return x
     r = jnp.asarray(norm, dtype=x.dtype)
     batch = jnp.shape(x)[:-1]
-    try:
-        fits = np.broadcast_shapes(jnp.shape(r), batch) == batch
-    except ValueError:
-        fits = False
-    if not fits:  # a (B, 1) norm would broadcast a (B, 3) batch to (B, B, 3)
+    if not fits_batch(jnp.shape(r), batch):  # a (B, 1) norm would broadcast a (B, 3) batch to (B, B, 3)
         raise InputError(f"Renormalized: a norm of shape {jnp.shape(r)} does not fit states of batch shape {batch}; "
                          f"give one norm per state (shape {batch}, e.g. jnp.linalg.norm(m0, axis=-1)) or a scalar")
     return x * (r / jnp.linalg.norm(x, axis=-1))[..., None]
@@ -281,10 +276,8 @@ def as_flow(flow, params=None) -> AbstractFlow:
     """A flow module from a module, or from a function ``fn(state, t[, params])``."""
     if isinstance(flow, AbstractFlow):
         if params is not None:
-    
             raise InputError("params= applies to plain-function flows; a flow module carries its own parameters")
         return flow
     if not callable(flow):
-
         raise InputError(f"a flow must be callable as flow(state, t), got {flow!r}")
     return FunctionFlow(flow, params, with_params=params is not None)

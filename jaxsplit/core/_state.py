@@ -57,6 +57,15 @@ def _describe(leaf) -> str:
     return f"{type(leaf).__name__} {text[:60]}{'...' if len(text) > 60 else ''}"
 
 
+def fits_batch(shape, batch) -> bool:
+    """``shape`` broadcasts to the states' batch shape ``batch`` without enlarging it (one value
+    per state, or one shared): a larger result would silently integrate other states than given."""
+    try:
+        return np.broadcast_shapes(tuple(shape), tuple(batch)) == tuple(batch)
+    except ValueError:
+        return False
+
+
 def ravel(state):
     """(flat vector of the floating leaves, unravel) with ``unravel(v)`` the state whose
     floating leaves are read from ``v`` and whose integer leaves are those of ``state``."""

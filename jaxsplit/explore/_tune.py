@@ -171,7 +171,11 @@ def tune_scheme(params, states, *, system=None, stages: int = 5, t_end: float = 
     # forward mode: z holds a few parameters, and a jvp per parameter compiles far faster than
     # the reverse pass through the step loop
     def value_and_grad(z):
-        g, v = jax.jacfwd(lambda z: (objective(z), objective(z)), has_aux=True)(z)
+        def value_twice(z):  # the value as jacfwd's aux: one evaluation gives both
+            v = objective(z)
+            return v, v
+
+        g, v = jax.jacfwd(value_twice, has_aux=True)(z)
         return v, g
 
     @jax.jit

@@ -52,6 +52,7 @@ import numpy as np
 
 from ..core._errors import InputError
 from ..core._flows import AbstractFlow
+from ..core._state import fits_batch
 
 PARTS = ("momentum", "vector", "attitude", "quaternion", "fixed")
 
@@ -385,11 +386,7 @@ class AbstractRotation(AbstractFlow):
 def _check_batch(parameter_shape, state_batch):
     """A batched body (leading axes on its parameters) needs states with those axes: the state
     is never silently broadcast to several bodies (shapes are static: checked under jit too)."""
-    try:
-        fits = np.broadcast_shapes(tuple(parameter_shape), tuple(state_batch)) == tuple(state_batch)
-    except ValueError:
-        fits = False
-    if not fits:
+    if not fits_batch(parameter_shape, state_batch):
         raise InputError(f"the body's inertia (a rotation's rate) has batch shape {tuple(parameter_shape)} but the "
                          f"state's batch shape is {tuple(state_batch)}: give one state per body, shape "
                          f"{tuple(parameter_shape) + (3,)}, or vmap over the bodies")
