@@ -17,10 +17,8 @@ moment (``Zygote.signal``: the stress runs), or from inside at a chosen phase (a
   running).
 """
 
-import contextlib
 import json
 import os
-import signal
 import subprocess
 import sys
 import time
@@ -132,9 +130,8 @@ class Zygote:
         root = Path(__file__).resolve().parents[1]
         env = dict(os.environ, PYTHONPATH=f"{root}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
                    PYTHONWARNINGS="ignore")
-        with sigint_at_default():
-            self.proc = subprocess.Popen([sys.executable, "-c", _SERVER], stdin=subprocess.PIPE,
-                                         stdout=subprocess.PIPE, text=True, env=env, cwd=root)
+        self.proc = subprocess.Popen([sys.executable, "-c", _SERVER], stdin=subprocess.PIPE,
+                                     stdout=subprocess.PIPE, text=True, env=env, cwd=root)
         self._count = 0
 
     def _request(self, req):
@@ -159,19 +156,6 @@ class Zygote:
     def close(self):
         self.proc.stdin.close()
         self.proc.wait(timeout=30)
-
-
-@contextlib.contextmanager
-def sigint_at_default():
-    """Start children with SIGINT at its default, as from a terminal, also when the tests run
-    in the background (where SIGINT is ignored, and the CLI keeps an inherited ignore)."""
-    previous = signal.getsignal(signal.SIGINT)
-    if previous is signal.SIG_IGN:
-        signal.signal(signal.SIGINT, signal.default_int_handler)  # a handler is reset to SIG_DFL by exec
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
 
 
 def leftovers(directory) -> list[str]:

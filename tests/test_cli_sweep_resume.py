@@ -15,7 +15,6 @@ import time
 
 import numpy as np
 import pytest
-from signal_harness import sigint_at_default
 
 from jaxsplit.cli import main
 
@@ -40,9 +39,8 @@ def _chunks(out):
 
 def _kill_part_way(out, sig):
     """Start the sweep in a subprocess and send ``sig`` once some chunk files exist."""
-    with sigint_at_default():  # also when the tests run in the background
-        proc = subprocess.Popen([sys.executable, "-m", "jaxsplit.cli", *ARGS, "--out", str(out)],
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen([sys.executable, "-m", "jaxsplit.cli", *ARGS, "--out", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + TIMEOUT
     while len(_chunks(out)) < KILL_AFTER_CHUNKS if out.exists() else True:
         assert proc.poll() is None, f"sweep ended before it could be killed: {proc.communicate()}"
