@@ -25,6 +25,10 @@ FD_EPS = 1e-6
 TRUE_INERTIA = np.array([1.3, 2.1, 2.9])
 NOISE = 1e-3
 
+# The three fits of ``observations`` share one compiled optimiser (same model and data shape):
+# one worker runs them, so the module fixture and the compilation are paid once, not per worker.
+SHARED_FIT = pytest.mark.xdist_group("fit-inertia-observations")
+
 
 @pytest.fixture(scope="module")
 def observations():
@@ -35,6 +39,7 @@ def observations():
     return t, jaxsplit.simulate_observations(TRUE_INERTIA, m0, t, NOISE, seed=12), m0
 
 
+@SHARED_FIT
 def test_recovers_ratios_within_one_percent_under_a_minute(observations):
     t, m, m0 = observations
     energy = 0.5 * np.sum(m0**2 / TRUE_INERTIA)
@@ -56,6 +61,7 @@ def test_recovers_ratios_within_one_percent_under_a_minute(observations):
     assert res.iterations > 0 and res.loss < 2 * NOISE**2
 
 
+@SHARED_FIT
 def test_without_gauge_information_the_ratios_are_an_assumption(observations):
     t, m, _ = observations
     res = jaxsplit.fit_inertia(t, m)
@@ -111,6 +117,7 @@ def test_checkpointed_gradient_memory_grows_sublinearly():
     assert temp_bytes(large, False) > 50 * ckpt_large  # the plain scan stores every step
 
 
+@SHARED_FIT
 def test_cli_fit_json(tmp_path, capsys, observations):
     t, m, _ = observations
     path = tmp_path / "obs.npz"
