@@ -1,5 +1,7 @@
 """integrate's one result type, output at arbitrary times, and the three adjoints."""
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -108,22 +110,31 @@ def _loss(adjoint, n, steps=None):
     return loss
 
 
+GRADIENT_ARGS = (jnp.asarray(jaxsplit.STANDARD_CASE.inertia), SM0)
+
+
+@functools.cache
+def _compiled_gradient(adjoint, n):
+    """The gradient of ``_loss(adjoint, n)`` in (inertia, m0), compiled once: the agreement and the
+    memory tests below share the 1e5-step programs (one xdist worker runs both)."""
+    return jax.jit(jax.grad(_loss(adjoint, n), argnums=(0, 1))).lower(*GRADIENT_ARGS).compile()
+
+
+@pytest.mark.xdist_group("adjoint-gradients")
 def test_adjoints_agree_over_1e5_steps():
-    args = (jnp.asarray(jaxsplit.STANDARD_CASE.inertia), SM0)
-    stored = jax.jit(jax.grad(_loss("store", 100_000), argnums=(0, 1)))(*args)
+    stored = _compiled_gradient("store", 100_000)(*GRADIENT_ARGS)
     for adjoint in ("checkpoint", "reversible"):
-        got = jax.jit(jax.grad(_loss(adjoint, 100_000), argnums=(0, 1)))(*args)
+        got = _compiled_gradient(adjoint, 100_000)(*GRADIENT_ARGS)
         for g, s in zip(got, stored):
             assert float(jnp.max(jnp.abs(g - s)) / jnp.max(jnp.abs(s))) <= GRADIENT_RTOL, adjoint
 
 
+@pytest.mark.xdist_group("adjoint-gradients")
 def test_reversible_memory_does_not_grow_with_the_step_count():
-    args = (jnp.asarray(jaxsplit.STANDARD_CASE.inertia), SM0)
     sizes = {}
     for adjoint in ("store", "reversible"):
         for n in (1_000, 100_000):
-            compiled = jax.jit(jax.grad(_loss(adjoint, n))).lower(*args).compile()
-            sizes[adjoint, n] = compiled.memory_analysis().temp_size_in_bytes
+            sizes[adjoint, n] = _compiled_gradient(adjoint, n).memory_analysis().temp_size_in_bytes
     assert sizes["reversible", 100_000] == sizes["reversible", 1_000]
     assert sizes["store", 100_000] > 50 * sizes["store", 1_000]  # the stored adjoint does grow
 
