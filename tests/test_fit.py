@@ -25,6 +25,10 @@ FD_EPS = 1e-6
 TRUE_INERTIA = np.array([1.3, 2.1, 2.9])
 NOISE = 1e-3
 
+# The three fits of ``observations`` share one compiled optimiser (same model and data shape):
+# one worker runs them, so the module fixture and the compilation are paid once, not per worker.
+SHARED_FIT = pytest.mark.xdist_group("fit-inertia-observations")
+
 
 @pytest.fixture(scope="module")
 def observations():
@@ -35,6 +39,7 @@ def observations():
     return t, jaxsplit.simulate_observations(TRUE_INERTIA, m0, t, NOISE, seed=12), m0
 
 
+@SHARED_FIT
 def test_recovers_ratios_within_one_percent_under_a_minute(observations):
     t, m, m0 = observations
     energy = 0.5 * np.sum(m0**2 / TRUE_INERTIA)
@@ -56,6 +61,7 @@ def test_recovers_ratios_within_one_percent_under_a_minute(observations):
     assert res.iterations > 0 and res.loss < 2 * NOISE**2
 
 
+@SHARED_FIT
 def test_without_gauge_information_the_ratios_are_an_assumption(observations):
     t, m, _ = observations
     res = jaxsplit.fit_inertia(t, m)
@@ -78,16 +84,17 @@ def test_long_horizon_gradient_matches_finite_differences():
         return jnp.sum((final - target) ** 2)
 
     x = jnp.log(jnp.asarray(jaxsplit.STANDARD_CASE.inertia))
-    grad = np.asarray(jax.jit(jax.grad(loss))(x))
+    value_and_grad = jax.jit(jax.value_and_grad(loss))  # one compilation: the gradient and the 6 values
+    grad = np.asarray(value_and_grad(x)[1])
     plain = np.asarray(jax.jit(jax.grad(lambda y: loss(y, False)))(x))
     assert np.max(np.abs(grad - plain)) < CHECKPOINT_MATCH * np.max(np.abs(grad))
-    value = jax.jit(loss)
+    value = lambda y: float(value_and_grad(y)[0])
     eye = np.eye(3)
     fd = np.array([(value(x + FD_EPS * e) - value(x - FD_EPS * e)) / (2 * FD_EPS) for e in eye])
     assert np.max(np.abs(grad - fd)) < GRAD_RTOL * np.max(np.abs(grad))
     # forward values are those of integrate
     step = jaxsplit.splitting(jaxsplit.RigidBody(jnp.exp(x)), "strang")
-    a = jaxsplit.integrate_checkpointed(step, m0, h, 1234, block=100)
+    a = jax.jit(lambda y: jaxsplit.integrate_checkpointed(step, y, h, 1234, block=100))(m0)  # not jitted itself
     b = jaxsplit.integrate(step, m0, h, 1234).final
     assert np.max(np.abs(np.asarray(a) - np.asarray(b))) < CHECKPOINT_MATCH
 
@@ -111,6 +118,7 @@ def test_checkpointed_gradient_memory_grows_sublinearly():
     assert temp_bytes(large, False) > 50 * ckpt_large  # the plain scan stores every step
 
 
+@SHARED_FIT
 def test_cli_fit_json(tmp_path, capsys, observations):
     t, m, _ = observations
     path = tmp_path / "obs.npz"

@@ -1,5 +1,7 @@
 """integrate's one result type, output at arbitrary times, and the three adjoints."""
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -45,21 +47,24 @@ def test_one_result_type():
     assert blown.status == "nonfinite" and not bool(blown.finite)
 
 
+_exact = jax.jit(lambda t: jaxsplit.symmetric_solution(BODY, M0, t))  # one program per length (op by op: ~15)
+
+
 @pytest.fixture(scope="module")
 def outputs_case():
     step = jaxsplit.splitting(BODY, "suzuki-5", "axes")  # axes split: not exact for this body
     h, n = 0.05, 400
     grid = jaxsplit.integrate(step, M0, h, n, save_every=1)
-    grid_error = float(jnp.max(jnp.abs(grid.x - jaxsplit.symmetric_solution(BODY, M0, grid.t))))
-    return step, h, n, grid_error
+    grid_error = float(np.max(np.abs(np.asarray(grid.x) - np.asarray(_exact(grid.t)))))
+    return step, h, n, grid_error, np.asarray(grid.x)
 
 
 def test_states_at_1000_random_times(outputs_case):
-    step, h, n, grid_error = outputs_case
+    step, h, n, grid_error, grid = outputs_case
     rng = np.random.default_rng(0)
     ts = np.sort(rng.uniform(0.0, h * n, 1000))
     sol = jaxsplit.integrate(step, M0, h, ts=ts)
-    exact = jaxsplit.symmetric_solution(BODY, M0, sol.t)
+    exact = _exact(sol.t)
     error = np.max(np.abs(np.asarray(sol.x) - np.asarray(exact)), axis=1)
     assert grid_error > 1e-12  # the comparison is not trivial
     assert np.max(error) <= ACCURACY_FACTOR * grid_error, (np.max(error), grid_error)
@@ -71,10 +76,12 @@ def test_states_at_1000_random_times(outputs_case):
     assert choice(0.04) == choice(h)  # the premise
     before = compilations()
     jaxsplit.integrate(step, M0, 0.04, ts=np.sort(rng.uniform(0.0, 20.0, 1000)))
+    # outputs on the grid are the grid states (1000 times again: the same compiled program)
+    on_grid = np.array([0.0, 1.0, 20.0])
+    ts = np.sort(np.concatenate([on_grid, rng.uniform(0.0, 20.0, 997)]))
+    at = np.asarray(jaxsplit.integrate(step, M0, h, ts=ts).x)[np.searchsorted(ts, on_grid)]
     assert compilations() == before
-    # outputs on the grid are the grid states
-    on_grid = jaxsplit.integrate(step, M0, h, ts=np.array([0.0, 1.0, 20.0]))
-    np.testing.assert_allclose(on_grid.final, jaxsplit.integrate(step, M0, h, n).final, atol=1e-14)
+    np.testing.assert_allclose(at, grid[[0, 20, 400]], atol=1e-14)
 
 
 def test_output_times_are_checked():
@@ -103,22 +110,31 @@ def _loss(adjoint, n, steps=None):
     return loss
 
 
+GRADIENT_ARGS = (jnp.asarray(jaxsplit.STANDARD_CASE.inertia), SM0)
+
+
+@functools.cache
+def _compiled_gradient(adjoint, n):
+    """The gradient of ``_loss(adjoint, n)`` in (inertia, m0), compiled once: the agreement and the
+    memory tests below share the 1e5-step programs (one xdist worker runs both)."""
+    return jax.jit(jax.grad(_loss(adjoint, n), argnums=(0, 1))).lower(*GRADIENT_ARGS).compile()
+
+
+@pytest.mark.xdist_group("adjoint-gradients")
 def test_adjoints_agree_over_1e5_steps():
-    args = (jnp.asarray(jaxsplit.STANDARD_CASE.inertia), SM0)
-    stored = jax.jit(jax.grad(_loss("store", 100_000), argnums=(0, 1)))(*args)
+    stored = _compiled_gradient("store", 100_000)(*GRADIENT_ARGS)
     for adjoint in ("checkpoint", "reversible"):
-        got = jax.jit(jax.grad(_loss(adjoint, 100_000), argnums=(0, 1)))(*args)
+        got = _compiled_gradient(adjoint, 100_000)(*GRADIENT_ARGS)
         for g, s in zip(got, stored):
             assert float(jnp.max(jnp.abs(g - s)) / jnp.max(jnp.abs(s))) <= GRADIENT_RTOL, adjoint
 
 
+@pytest.mark.xdist_group("adjoint-gradients")
 def test_reversible_memory_does_not_grow_with_the_step_count():
-    args = (jnp.asarray(jaxsplit.STANDARD_CASE.inertia), SM0)
     sizes = {}
     for adjoint in ("store", "reversible"):
         for n in (1_000, 100_000):
-            compiled = jax.jit(jax.grad(_loss(adjoint, n))).lower(*args).compile()
-            sizes[adjoint, n] = compiled.memory_analysis().temp_size_in_bytes
+            sizes[adjoint, n] = _compiled_gradient(adjoint, n).memory_analysis().temp_size_in_bytes
     assert sizes["reversible", 100_000] == sizes["reversible", 1_000]
     assert sizes["store", 100_000] > 50 * sizes["store", 1_000]  # the stored adjoint does grow
 
@@ -127,12 +143,13 @@ def test_reversible_gradient_at_output_times_matches_finite_differences():
     step = jaxsplit.splitting(STANDARD, "suzuki-5", "casimir")
     ts = jnp.array([0.37, 1.2, 3.05])
 
+    @jax.jit
     def loss(m0):
         return jnp.sum(jaxsplit.integrate(step, m0, 0.1, ts=ts, adjoint="reversible").x[:, 0])
 
-    g = jax.grad(loss)(SM0)
-    eps = 1e-6
-    fd = jnp.stack([(loss(SM0.at[k].add(eps)) - loss(SM0.at[k].add(-eps))) / (2 * eps) for k in range(3)])
+    g = jax.jit(jax.grad(loss))(SM0)
+    eps, m0 = 1e-6, np.asarray(SM0)
+    fd = [(float(loss(m0 + eps * e)) - float(loss(m0 - eps * e))) / (2 * eps) for e in np.eye(3)]
     np.testing.assert_allclose(g, fd, rtol=FD_RTOL, atol=1e-9)
 
 
@@ -159,14 +176,17 @@ def test_float32_casimir_drift_and_the_opt_in_projection():
     m32 = jnp.asarray(m / np.linalg.norm(m, axis=1, keepdims=True), dtype=jnp.float32)
     step = jaxsplit.splitting(body32, "kahan-li-6", "axes")
     projected = jaxsplit.Renormalized(step, jnp.linalg.norm(m32, axis=-1))
+    @jax.jit
+    def measure(x32):  # one program for both runs (op by op: ~20)
+        x = x32.astype(jnp.float64)
+        c, h = jnp.sum(x**2, axis=-1), STANDARD.hamiltonian(x)
+        return jnp.max(jnp.abs(c / c[0] - 1)), jnp.median(jnp.max(jnp.abs(h / h[0] - 1), axis=0))
+
     drift, energy = {}, {}
     for name, s in (("plain", step), ("projected", projected)):
         sol = jaxsplit.integrate(s, m32, 0.1, 20_000, save_every=2_000)
         assert sol.x.dtype == jnp.float32
-        x = sol.x.astype(jnp.float64)
-        c, h = jnp.sum(x**2, axis=-1), STANDARD.hamiltonian(x)
-        drift[name] = float(jnp.max(jnp.abs(c / c[0] - 1)))
-        energy[name] = float(jnp.median(jnp.max(jnp.abs(h / h[0] - 1), axis=0)))
+        drift[name], energy[name] = map(float, measure(sol.x))
     assert drift["plain"] >= FLOAT32_DRIFT_SEEN  # the drift exists and is measured
     assert drift["projected"] <= FLOAT32_PROJECTED
     assert energy["projected"] <= FLOAT32_ENERGY_RATIO * energy["plain"]

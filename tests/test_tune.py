@@ -32,6 +32,10 @@ def test_published_five_stage_tables_are_in_the_family(name):
     np.testing.assert_allclose(jaxsplit.order4_coefficients(order4_parameters(g)), g, rtol=0, atol=1e-15)
 
 
+# The two tests of the tuned scheme run on one xdist worker: the module fixture tunes once, not once per worker.
+SHARED_TUNING = pytest.mark.xdist_group("tuned-scheme")
+
+
 @pytest.fixture(scope="module")
 def tuned():
     inertias, states = jaxsplit.random_bodies(24, seed=1)
@@ -40,6 +44,7 @@ def tuned():
                                 iterations=100, learning_rate=0.05)
 
 
+@SHARED_TUNING
 def test_learned_method_has_order_four(tuned):
     sc = jaxsplit.STANDARD_CASE
     counts = np.array([20, 28, 40, 56, 80])
@@ -50,6 +55,7 @@ def test_learned_method_has_order_four(tuned):
     assert tuned.loss < 0 and np.all(np.isfinite(tuned.history))
 
 
+@SHARED_TUNING
 def test_learned_beats_best_published_of_equal_cost_on_held_out_bodies(tuned):
     inertias, states = jaxsplit.random_bodies(64, seed=99)
 
