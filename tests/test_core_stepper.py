@@ -13,7 +13,9 @@ from jaxsplit import InputError, RigidBody
 
 REVERSIBILITY_TOL = 1e-14
 MERGE_TOL = 1e-12
-MERGE_H, MERGE_STEPS = 0.05, 1000
+# The merged run is test_core_conservation.py's: 10⁵ steps of h = 0.1 saved every 100, compared
+# after MERGE_STEPS; one compiled program serves both tests (same xdist group, same worker).
+MERGE_H, MERGE_STEPS, MERGE_RUN, MERGE_SAVE_EVERY = 0.1, 1000, 100_000, 100
 ROUNDOFF = 1e-13
 ACCUMULATED_ROUNDOFF = 1e-12  # 2 x 500 steps x 34 rotations
 TABLE_RTOL = 0.05  # the reference table prints two significant digits
@@ -128,8 +130,8 @@ def reversal_errors(split):
     @jax.vmap
     def worst(pieces, weights):
         step = jaxsplit.RolledComposition(flows, pieces, weights)
-        return jnp.max(jnp.stack([jnp.abs(jax.vmap(lambda m, h=h: step(step(m, h), -h))(states) - states).max()
-                                  for h in (1e-3, 0.1, 1.0)]))
+        there_and_back = jax.vmap(jax.vmap(lambda m, h: step(step(m, h), -h), (0, None)), (None, 0))
+        return jnp.abs(there_and_back(states, jnp.array([1e-3, 0.1, 1.0])) - states).max()
 
     return dict(zip(names, np.asarray(worst(pieces, weights))))
 
@@ -157,12 +159,15 @@ def unmerged_finals(split, n_steps=MERGE_STEPS):
     return dict(zip(names, np.asarray(run(pieces, weights))))
 
 
-@pytest.mark.parametrize("name, split", SPLITS)
+@pytest.mark.parametrize("name, split", [pytest.param(name, split, marks=pytest.mark.xdist_group(f"unrolled-{name}"))
+                                         for name, split in SPLITS])
 def test_merged_and_unmerged_compositions_agree(name, split):
     """The merged composition as users run it (unrolled, merged across steps by ``advance``)
-    against the scheme's sub-flows as written."""
-    merged = jaxsplit.splitting(STANDARD, name, split)
-    a = jaxsplit.integrate(merged, M0, MERGE_H, MERGE_STEPS).final
+    against the scheme's sub-flows as written, after MERGE_STEPS steps."""
+    merged = jaxsplit.integrate(jaxsplit.splitting(STANDARD, name, split), M0, MERGE_H, MERGE_RUN,
+                                save_every=MERGE_SAVE_EVERY)
+    assert float(merged.t[MERGE_STEPS // MERGE_SAVE_EVERY]) == pytest.approx(MERGE_STEPS * MERGE_H, rel=1e-15)
+    a = merged.x[MERGE_STEPS // MERGE_SAVE_EVERY]
     assert np.abs(a - unmerged_finals(split)[name]).max() <= MERGE_TOL
 
 
