@@ -49,8 +49,6 @@ REFERENCE_TABLE = [
 ]
 
 
-
-
 def test_automatic_casimir_shift_beats_the_other_axes():
     """The middle axis minimises |c_a c_b|; measured on the standard case at equal cost."""
     errors = {}
