@@ -15,7 +15,9 @@ BODY = jaxsplit.RigidBody(jnp.asarray(jaxsplit.STANDARD_CASE.inertia))
 M0 = jnp.asarray(jaxsplit.STANDARD_CASE.m0)
 
 
-@pytest.mark.parametrize("name", list(jaxsplit.schemes))
+# the same run as test_core_stepper.py's merge check: one compiled program on one xdist worker
+@pytest.mark.parametrize("name", [pytest.param(name, marks=pytest.mark.xdist_group(f"unrolled-{name}"))
+                                  for name in jaxsplit.schemes])
 def test_casimir_conserved_over_1e5_steps(name):
     split = "axes" if jaxsplit.schemes[name].pieces_allowed(3) else "casimir"
     traj = jaxsplit.integrate(jaxsplit.splitting(BODY, name, split), M0, 0.1, 100_000, save_every=100)

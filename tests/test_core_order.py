@@ -7,6 +7,13 @@ The order is the log-log regression slope of the global error at T = 10 over a l
 ``ORDER_WINDOW`` (about 10x above the round-off floor, below 1e-4) and step sizes whose
 largest sub-step |w| h is at most ``ASYMPTOTIC_SUBSTEP`` (the problem's time scale is ~1;
 the triple jumps' sub-steps are up to 2.8 h).
+
+The order is the map's: each scheme's word runs rolled (``roll``: the word as data), so a case
+compiles a program whose size does not grow with the word, and the two problems of a scheme
+share it (the unrolled program of a 10th-order word took ~5 s to compile, per problem). The
+unrolled, merged stepper users run is the same map to 1e-12 (test_core_stepper.py's
+``test_merged_and_unmerged_compositions_agree``); measured orders of both forms agree within
+0.04 on every case.
 """
 
 import jax.numpy as jnp
@@ -53,10 +60,11 @@ UNRESOLVABLE_IN_FLOAT64 = {
     ("sofroniou-spaletta-10", "casimir", "standard-reference"),
 }
 
+XFAIL = pytest.mark.xfail(strict=True, reason="order-10 asymptotic regime below float64 round-off here")
+# a scheme's two problems run one compiled program: on one xdist worker (``--dist loadgroup``)
 CASES = [
-    pytest.param(name, split, problem, marks=pytest.mark.xfail(
-        strict=True, reason="order-10 asymptotic regime below float64 round-off here"))
-    if (name, split, problem) in UNRESOLVABLE_IN_FLOAT64 else (name, split, problem)
+    pytest.param(name, split, problem, marks=[pytest.mark.xdist_group(f"order-{name}-{split}")]
+                 + ([XFAIL] if (name, split, problem) in UNRESOLVABLE_IN_FLOAT64 else []))
     for name in jaxsplit.schemes
     for split, pieces in (("axes", 3), ("casimir", 2))
     if jaxsplit.schemes[name].pieces_allowed(pieces)
@@ -73,7 +81,7 @@ def test_measured_order_matches_nominal(name, split, problem):
     max_step = ASYMPTOTIC_SUBSTEP / largest_weight
     smallest_start, factor, points = LADDER[scheme.order]
     counts = jaxsplit.ladder(max(smallest_start, int(np.ceil(T_END / max_step))), factor, points)
-    hs, errors = jaxsplit.global_errors(step, m0, T_END, counts, reference)
+    hs, errors = jaxsplit.global_errors(jaxsplit.roll(step), m0, T_END, counts, reference)
     fit = jaxsplit.fit_order(hs, errors, ORDER_WINDOW, max_step=max_step)
     assert abs(fit.order - scheme.order) <= ORDER_TOL, (
         f"{name}/{split}/{problem}: measured order {fit.order:.2f}, nominal {scheme.order}; "

@@ -13,7 +13,9 @@ from jaxsplit import InputError, RigidBody
 
 REVERSIBILITY_TOL = 1e-14
 MERGE_TOL = 1e-12
-MERGE_H, MERGE_STEPS = 0.05, 1000
+# The merged run is test_core_conservation.py's: 10⁵ steps of h = 0.1 saved every 100, compared
+# after MERGE_STEPS; one compiled program serves both tests (same xdist group, same worker).
+MERGE_H, MERGE_STEPS, MERGE_RUN, MERGE_SAVE_EVERY = 0.1, 1000, 100_000, 100
 ROUNDOFF = 1e-13
 ACCUMULATED_ROUNDOFF = 1e-12  # 2 x 500 steps x 34 rotations
 TABLE_RTOL = 0.05  # the reference table prints two significant digits
@@ -47,14 +49,6 @@ REFERENCE_TABLE = [
 ]
 
 
-@pytest.mark.parametrize("name, split, shift, steps, expected", REFERENCE_TABLE)
-def test_reproduces_the_reference_error_table(name, split, shift, steps, expected):
-    """Independent check of composition order and conventions (50-digit-verified table)."""
-    step = jaxsplit.splitting(STANDARD, name, split, **({"shift": shift - 1} if shift else {}))
-    error = np.abs(np.asarray(jaxsplit.integrate(step, M0, 10.0 / steps, steps).final) - REFERENCE).max()
-    assert abs(error / expected - 1) <= TABLE_RTOL
-
-
 def test_automatic_casimir_shift_beats_the_other_axes():
     """The middle axis minimises |c_a c_b|; measured on the standard case at equal cost."""
     errors = {}
@@ -81,17 +75,45 @@ def test_rotation_counts_after_merging():
     assert len(jaxsplit.splitting(STANDARD, "strang", merge_flows=False).word) == 6
 
 
-def rolled_registry(split, merge_flows=None, symmetric_only=False):
-    """Every scheme allowed on ``split`` as one rolled family: (names, flows, pieces, weights),
-    the words padded to one length, so that a check over the whole registry is ONE compilation
-    (``jax.vmap`` over the stacked words) instead of one per scheme."""
-    names = [n for n, s in SPLITS if s == split and (jaxsplit.schemes[n].symmetric or not symmetric_only)]
-    comps = [jaxsplit.splitting(STANDARD, n, split, merge_flows=merge_flows) for n in names]
+def rolled_registry(split, merge_flows=None, symmetric_only=False, names=None, **options):
+    """Every scheme allowed on ``split`` (or those ``names``) as one rolled family: (names, flows,
+    pieces, weights), the words padded to one length, so that a check over the whole registry is
+    ONE compilation (``jax.vmap`` over the stacked words) instead of one per scheme."""
+    if names is None:
+        names = [n for n, s in SPLITS if s == split and (jaxsplit.schemes[n].symmetric or not symmetric_only)]
+    comps = [jaxsplit.splitting(STANDARD, n, split, merge_flows=merge_flows, **options) for n in names]
     length = max(len(c.word) for c in comps)
     rolled = [jaxsplit.roll(c, length) for c in comps]
     flows = rolled[0].flows
     assert all(jax.tree_util.tree_structure(r.flows) == jax.tree_util.tree_structure(flows) for r in rolled)
     return names, flows, jnp.stack([r.pieces for r in rolled]), jnp.stack([r.weights for r in rolled])
+
+
+@functools.cache
+def table_errors(split):
+    """{(scheme, steps): max |m(10) − reference|} for the table's rows on ``split``: each scheme's
+    sub-flows as written (``merge_flows=False``), rolled, every row in ONE compilation: each
+    row's step size runs the longest row's step count with every state saved, and its own count
+    is read off (a static count per row compiled every row's unrolled stepper anew). The
+    stepper users run (unrolled, merged) is tied to these words to 1e-12 by
+    ``test_merged_and_unmerged_compositions_agree``."""
+    rows = [row for row in REFERENCE_TABLE if row[1] == split]
+    (shift,) = {row[2] for row in rows}
+    _, flows, pieces, weights = rolled_registry(split, merge_flows=False, names=[row[0] for row in rows],
+                                                **({"shift": shift - 1} if shift else {}))
+    longest = max(row[3] for row in rows)
+    run = jax.jit(jax.vmap(lambda p, w, h: jaxsplit.integrate(
+        jaxsplit.RolledComposition(flows, p, w), M0, h, longest, save_every=1).x))
+    states = np.asarray(run(pieces, weights, jnp.asarray([10.0 / row[3] for row in rows])))
+    return {(name, steps): np.abs(states[k, steps] - REFERENCE).max()
+            for k, (name, _, _, steps, _) in enumerate(rows)}
+
+
+@pytest.mark.parametrize("name, split, shift, steps, expected", REFERENCE_TABLE)
+def test_reproduces_the_reference_error_table(name, split, shift, steps, expected):
+    """Independent check of composition order and conventions (50-digit-verified table)."""
+    error = table_errors(split)[(name, steps)]
+    assert abs(error / expected - 1) <= TABLE_RTOL
 
 
 @functools.cache
@@ -106,8 +128,8 @@ def reversal_errors(split):
     @jax.vmap
     def worst(pieces, weights):
         step = jaxsplit.RolledComposition(flows, pieces, weights)
-        return jnp.max(jnp.stack([jnp.abs(jax.vmap(lambda m, h=h: step(step(m, h), -h))(states) - states).max()
-                                  for h in (1e-3, 0.1, 1.0)]))
+        there_and_back = jax.vmap(jax.vmap(lambda m, h: step(step(m, h), -h), (0, None)), (None, 0))
+        return jnp.abs(there_and_back(states, jnp.array([1e-3, 0.1, 1.0])) - states).max()
 
     return dict(zip(names, np.asarray(worst(pieces, weights))))
 
@@ -135,12 +157,15 @@ def unmerged_finals(split, n_steps=MERGE_STEPS):
     return dict(zip(names, np.asarray(run(pieces, weights))))
 
 
-@pytest.mark.parametrize("name, split", SPLITS)
+@pytest.mark.parametrize("name, split", [pytest.param(name, split, marks=pytest.mark.xdist_group(f"unrolled-{name}"))
+                                         for name, split in SPLITS])
 def test_merged_and_unmerged_compositions_agree(name, split):
     """The merged composition as users run it (unrolled, merged across steps by ``advance``)
-    against the scheme's sub-flows as written."""
-    merged = jaxsplit.splitting(STANDARD, name, split)
-    a = jaxsplit.integrate(merged, M0, MERGE_H, MERGE_STEPS).final
+    against the scheme's sub-flows as written, after MERGE_STEPS steps."""
+    merged = jaxsplit.integrate(jaxsplit.splitting(STANDARD, name, split), M0, MERGE_H, MERGE_RUN,
+                                save_every=MERGE_SAVE_EVERY)
+    assert float(merged.t[MERGE_STEPS // MERGE_SAVE_EVERY]) == pytest.approx(MERGE_STEPS * MERGE_H, rel=1e-15)
+    a = merged.x[MERGE_STEPS // MERGE_SAVE_EVERY]
     assert np.abs(a - unmerged_finals(split)[name]).max() <= MERGE_TOL
 
 

@@ -155,8 +155,9 @@ def test_every_scheme_is_poisson_and_runge_kutta_is_not(label, system, x0, split
         defect = float(worst(jaxsplit.roll(comp, length), sub_steps / largest))
         assert defect <= POISSON_TOL, (label, split, comp.scheme.name, defect)
     assert len(comps) >= len(jaxsplit.schemes) - 2
-    for method in (jaxsplit.rk4, jaxsplit.explicit_euler):
-        assert float(jaxsplit.poisson_defect(method(system), system, x0, 0.3)) > RK_FLOOR, (label, method)
+    for method in (jaxsplit.rk4, jaxsplit.explicit_euler):  # compiled: RK4's Jacobian op by op took ~6 s CPU
+        defect = jax.jit(lambda x, method=method: jaxsplit.poisson_defect(method(system), system, x, 0.3))(x0)
+        assert float(defect) > RK_FLOOR, (label, method)
 
 
 # ------------------------------------------------------------------ parameters
