@@ -4,7 +4,7 @@ Optional extra (``pip install -e ".[diffrax]"``); the core package never imports
 
     >>> import diffrax, jax.numpy as jnp, jaxsplit, jaxsplit.diffrax as jd
     >>> body = jaxsplit.RigidBody([2.0, 1.0, 2.0 / 3.0])
-    >>> sol = diffrax.diffeqsolve(jd.term(body, split="casimir"), jd.Splitting("kahan-li-6"),
+    >>> sol = diffrax.diffeqsolve(jd.term(body, split="casimir"), jd.Splitting("strang"),
     ...                           0.0, 10.0, 0.05, jnp.array([0.6, 0.0, 0.8]),
     ...                           saveat=diffrax.SaveAt(ts=jnp.linspace(0.0, 10.0, 7)))
     >>> sol.ys.shape

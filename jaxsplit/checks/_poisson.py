@@ -256,7 +256,7 @@ def poisson_summary(step: Callable, poisson_matrix: Callable, xs, hs) -> DefectS
     >>> import jax, jaxsplit
     >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5])
     >>> xs = jax.random.normal(jax.random.PRNGKey(0), (16, 3))
-    >>> jaxsplit.poisson_summary(jaxsplit.splitting(body, "suzuki-5"), body, xs, 0.2).max < 1e-14
+    >>> jaxsplit.poisson_summary(jaxsplit.splitting(body, "strang"), body, xs, 0.2).max < 1e-14
     True
     """
     return defect_summary(lambda x, h: poisson_defect(step, poisson_matrix, x, h), xs, hs)

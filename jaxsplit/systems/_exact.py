@@ -178,12 +178,14 @@ def exact_solution(body, x0, t):
 
     >>> import jax.numpy as jnp, jaxsplit
     >>> inertia, m0 = jnp.array([2.0, 1.0, 2 / 3]), jnp.array([0.4, -0.3, 0.8])
-    >>> jaxsplit.exact_solution(inertia, m0, jnp.array([0.0, 1.0, 10.0]))   # one evaluation per time
+    >>> m = jaxsplit.exact_solution(inertia, m0, jnp.array([0.0, 1.0, 10.0]))   # one evaluation per time
+    >>> m
     Array([[ 0.4       , -0.3       ,  0.8       ],
            [ 0.23342137, -0.54866103,  0.73108518],
            [ 0.39690723,  0.30810599,  0.79845811]], dtype=float64)
-    >>> m10 = jaxsplit.integrate(jaxsplit.splitting(jaxsplit.RigidBody(inertia), "kahan-li-8"), m0, 0.01, 1000).final
-    >>> float(jnp.max(jnp.abs(m10 - jaxsplit.exact_solution(inertia, m0, 10.0)))) < 1e-13
+    >>> step = jaxsplit.roll(jaxsplit.splitting(jaxsplit.RigidBody(inertia), "kahan-li-8"))  # compiles fast
+    >>> m10 = jaxsplit.integrate(step, m0, 0.01, 1000).final
+    >>> float(jnp.max(jnp.abs(m10 - m[2]))) < 1e-13                   # m(10) against Kahan–Li 8
     True
     """
     inertia = getattr(body, "inertia", body)

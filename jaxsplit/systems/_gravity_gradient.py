@@ -64,7 +64,7 @@ def gravity_gradient(inertia, rate) -> GravityGradient:
     >>> import jax.numpy as jnp, jaxsplit
     >>> satellite = jaxsplit.gravity_gradient(jnp.array([2.0, 1.0, 2 / 3]), rate=0.1)
     >>> x0 = (jnp.zeros(3), jnp.array([0.0, 0.6, 0.8]))            # at rest in the body, Γ toward the planet
-    >>> m, gamma = jaxsplit.integrate(jaxsplit.splitting(satellite, "kahan-li-6"), x0, 0.1, 500).final
+    >>> m, gamma = jaxsplit.integrate(jaxsplit.splitting(satellite, "strang"), x0, 0.1, 500).final
     >>> abs(float(gamma @ gamma) - 1) < 1e-13
     True
     """
