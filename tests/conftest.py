@@ -3,7 +3,6 @@
 import importlib.util
 import os
 import pathlib
-import signal
 
 # The suite compiles hundreds of programs and runs most of them briefly, so LLVM's expensive
 # passes cost more than they save (tests/test_core_conservation.py: 70 s of CPU instead of 85 s).
@@ -22,15 +21,13 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 
 
 @pytest.fixture(scope="session", autouse=True)
-def sigint_at_default():
-    """The signal tests act as a user at a terminal: SIGINT at its default in this process and,
-    through it, in every child, also when the suite runs in the background, where SIGINT starts
-    ignored and the CLI keeps an inherited ignore (that case has a test of its own)."""
-    previous = signal.getsignal(signal.SIGINT)
-    if previous is signal.SIG_IGN:
-        signal.signal(signal.SIGINT, signal.default_int_handler)  # exec resets a handler to SIG_DFL
-    yield
-    signal.signal(signal.SIGINT, previous)
+def sigint_at_default_for_the_session():
+    """The signal tests act as a user at a terminal (``signal_harness.sigint_at_default``);
+    that SIGINT stays ignored where it starts ignored has a test of its own."""
+    from signal_harness import sigint_at_default
+
+    with sigint_at_default():
+        yield
 
 
 def docs_hooks():

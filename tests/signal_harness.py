@@ -17,8 +17,10 @@ moment (``Zygote.signal``: the stress runs), or from inside at a chosen phase (a
   running).
 """
 
+import contextlib
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -161,3 +163,17 @@ class Zygote:
 def leftovers(directory) -> list[str]:
     """Temporary, lock and staging files of the writer left in ``directory`` (recursively)."""
     return sorted(str(p.relative_to(directory)) for p in Path(directory).rglob(".jaxsplit*"))
+
+
+@contextlib.contextmanager
+def sigint_at_default():
+    """SIGINT at its default here and, through this process, in every child, as from a terminal,
+    also when started in the background (where SIGINT starts ignored, and the CLI keeps an
+    inherited ignore). The suite holds it for its whole session (``conftest.py``)."""
+    previous = signal.getsignal(signal.SIGINT)
+    if previous is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # exec resets a handler to SIG_DFL
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
