@@ -1,0 +1,75 @@
+"""XLA's CPU runtime and small loops: one setting, applied when jaxsplit is imported.
+
+XLA runs a ``while`` loop on the CPU as one dispatched kernel per fused operation per
+iteration, unless one iteration touches fewer bytes than its option
+``xla_cpu_small_while_loop_byte_threshold`` (1 KiB by default): then the whole loop is one
+compiled kernel. A composition step on one body, a heavy top or a few hundred bodies is
+dozens of tiny fused operations, so under the default their dispatch, not the arithmetic,
+sets the time (``benchmarks/results/small_loops.md``: a heavy top's reversible gradient
+8.2× its forward run with the default, 2.5× as one kernel; McLachlan SS15 on 256 bodies
+1.7× faster). Above a few MiB per iteration (10⁵ bodies) one kernel loses XLA's
+multi-threading of large operations and is slower, hence the bound below.
+
+``import jaxsplit`` raises the option to ``SMALL_LOOP_BYTES`` through ``XLA_FLAGS`` (inside
+``--xla_backend_extra_options``, which XLA reads once, when JAX starts its backend) unless
+you set it yourself, which is also how to opt out (``…=1024`` restores XLA's default), or
+JAX's backend has already started (then nothing changes). ``small_loop_setting()`` says
+which happened. Results: bit-identical in the benchmark's runs on one body, a heavy top and
+its gradients; a 256-body run of the general cos/sin kernel differed at 4e-12 after 2,000
+steps (a different but equally rounded sin/cos), as any change of XLA's code generation may.
+"""
+
+import os
+import sys
+
+OPTION = "xla_cpu_small_while_loop_byte_threshold"
+SMALL_LOOP_BYTES = 4 * 2**20
+_EXTRA = "--xla_backend_extra_options="
+_STATE: list[str] = []  # what the import did: one entry
+
+
+def with_small_loops(flags: str, threshold: int = SMALL_LOOP_BYTES) -> str | None:
+    """``flags`` (an ``XLA_FLAGS`` value) with ``OPTION=threshold`` added to its backend
+    options, or None where ``flags`` already sets ``OPTION`` (the user's choice stands)."""
+    tokens = flags.split()
+    extras = [k for k, token in enumerate(tokens) if token.startswith(_EXTRA)]
+    if any(entry.split("=", 1)[0] == OPTION for k in extras for entry in tokens[k][len(_EXTRA):].split(",")):
+        return None
+    setting = f"{OPTION}={threshold}"
+    if extras:  # XLA keeps the last occurrence of a flag: extend that one
+        last = extras[-1]
+        tokens[last] = tokens[last] + ("," if tokens[last] != _EXTRA else "") + setting
+    else:
+        tokens.append(_EXTRA + setting)
+    return " ".join(tokens)
+
+
+def _backend_started() -> bool:
+    if "jax" not in sys.modules:  # without JAX imported no backend can have started (JAX is not imported here)
+        return False
+    try:
+        from jax._src import xla_bridge
+        return bool(xla_bridge.backends_are_initialized())
+    except (ImportError, AttributeError):  # a JAX without this query: assume started, change nothing
+        return True
+
+
+def apply_small_loops(environ=os.environ) -> str:
+    """Set the option in ``environ['XLA_FLAGS']`` where it can still take effect; returns
+    ``small_loop_setting()``'s answer."""
+    flags = environ.get("XLA_FLAGS", "")
+    updated = with_small_loops(flags)
+    if updated is None:
+        return "yours: XLA_FLAGS sets " + OPTION
+    if _backend_started():
+        return "off: JAX's backend started before jaxsplit was imported (XLA's default, 1 KiB)"
+    environ["XLA_FLAGS"] = updated
+    return f"on: loops touching < {SMALL_LOOP_BYTES // 2**20} MiB per iteration compile to one kernel"
+
+
+def small_loop_setting() -> str:
+    """Whether XLA compiles jaxsplit's small loops as one kernel: ``"on: …"`` (set at import),
+    ``"yours: …"`` (your ``XLA_FLAGS`` set it) or ``"off: …"`` (the backend had started)."""
+    if not _STATE:
+        _STATE.append(apply_small_loops())
+    return _STATE[0]
