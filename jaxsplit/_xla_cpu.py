@@ -3,20 +3,21 @@
 XLA runs a ``while`` loop on the CPU as one dispatched kernel per fused operation per
 iteration, unless one iteration touches fewer bytes than its option
 ``xla_cpu_small_while_loop_byte_threshold`` (1 KiB by default): then the whole loop is one
-compiled kernel. A composition step on one body, a heavy top or a few hundred bodies is
-dozens of tiny fused operations, so under the default their dispatch, not the arithmetic,
-sets the time (``benchmarks/results/small_loops.md``: a heavy top's reversible gradient
-8.2× its forward run with the default, 2.5× as one kernel; McLachlan SS15 on 256 bodies
-1.7× faster). Above a few MiB per iteration (10⁵ bodies) one kernel loses XLA's
-multi-threading of large operations and is slower, hence the bound below.
+compiled kernel. A composition step on one body or a heavy top is dozens of tiny fused
+operations, so under the default their dispatch, not the arithmetic, sets the time
+(``benchmarks/results/small_loops.md``: a heavy top's reversible gradient over 10⁵ steps
+3.1× faster, one body with Kahan–Li 8 1.2× faster; 256 and 10⁴ bodies run as fast either
+way and compile up to a third longer). Above a few MiB per iteration (10⁵ bodies) one kernel
+would lose XLA's multi-threading of large operations, hence the bound below.
 
 ``import jaxsplit`` raises the option to ``SMALL_LOOP_BYTES`` through ``XLA_FLAGS`` (inside
 ``--xla_backend_extra_options``, which XLA reads once, when JAX starts its backend) unless
 you set it yourself, which is also how to opt out (``…=1024`` restores XLA's default), or
 JAX's backend has already started (then nothing changes). ``small_loop_setting()`` says
-which happened. Results: bit-identical in the benchmark's runs on one body, a heavy top and
-its gradients; a 256-body run of the general cos/sin kernel differed at 4e-12 after 2,000
-steps (a different but equally rounded sin/cos), as any change of XLA's code generation may.
+which happened. Results were bit-identical in every run of that benchmark; XLA does not
+promise it (a 256-body run of the general cos/sin kernel under ``jit`` differed at 4e-12
+after 2,000 steps: another, equally rounded sin/cos), so bit-reproducibility is per setting,
+and the command line records ``XLA_FLAGS`` with every run.
 """
 
 import os
