@@ -3,12 +3,14 @@
 XLA runs a ``while`` loop on the CPU as one dispatched kernel per fused operation per
 iteration, unless one iteration touches fewer bytes than its option
 ``xla_cpu_small_while_loop_byte_threshold`` (1 KiB by default): then the whole loop is one
-compiled kernel. A composition step on one body or a heavy top is dozens of tiny fused
-operations, so under the default their dispatch, not the arithmetic, sets the time
-(``benchmarks/results/small_loops.md``: a heavy top's reversible gradient over 10⁵ steps
-3.1× faster, one body with Kahan–Li 8 1.2× faster; 256 and 10⁴ bodies run as fast either
-way and compile up to a third longer). Above a few MiB per iteration (10⁵ bodies) one kernel
-would lose XLA's multi-threading of large operations, hence the bound below.
+compiled kernel. A composition step on one body, a heavy top or a few bodies is dozens of
+tiny fused operations, so under the default their dispatch, not the arithmetic, sets the
+time (``benchmarks/results/small_loops.md``: a heavy top's reversible gradient over 10⁵
+steps 3.1× faster, one body with Kahan–Li 8 1.2× faster). On hundreds of bodies each fused
+operation has enough work to hide its dispatch: one kernel ran no faster and compiled up to
+a third longer, and on 10⁵ bodies it loses XLA's multi-threading. Hence the bound below:
+64 KiB per iteration, one body or a top with any scheme, up to ~50 bodies with an
+eighth-order one.
 
 ``import jaxsplit`` raises the option to ``SMALL_LOOP_BYTES`` through ``XLA_FLAGS`` (inside
 ``--xla_backend_extra_options``, which XLA reads once, when JAX starts its backend) unless
@@ -24,7 +26,7 @@ import os
 import sys
 
 OPTION = "xla_cpu_small_while_loop_byte_threshold"
-SMALL_LOOP_BYTES = 4 * 2**20
+SMALL_LOOP_BYTES = 64 * 2**10
 _EXTRA = "--xla_backend_extra_options="
 _STATE: list[str] = []  # what the import did: one entry
 
@@ -65,7 +67,7 @@ def apply_small_loops(environ=os.environ) -> str:
     if _backend_started():
         return "off: JAX's backend started before jaxsplit was imported (XLA's default, 1 KiB)"
     environ["XLA_FLAGS"] = updated
-    return f"on: loops touching < {SMALL_LOOP_BYTES // 2**20} MiB per iteration compile to one kernel"
+    return f"on: loops touching < {SMALL_LOOP_BYTES // 2**10} KiB per iteration compile to one kernel"
 
 
 def small_loop_setting() -> str:
