@@ -29,15 +29,25 @@ OPTION = "xla_cpu_small_while_loop_byte_threshold"
 SMALL_LOOP_BYTES = 64 * 2**10
 _EXTRA = "--xla_backend_extra_options="
 _STATE: list[str] = []  # what the import did: one entry
+_ON = f"on: loops touching < {SMALL_LOOP_BYTES // 2**10} KiB per iteration compile to one kernel"
+
+
+def _backend_options(flags: str):
+    """(key, value) of every entry of every ``--xla_backend_extra_options`` in ``flags``, in order."""
+    for token in flags.split():
+        if token.startswith(_EXTRA):
+            for entry in filter(None, token[len(_EXTRA):].split(",")):
+                key, _, value = entry.partition("=")
+                yield key, value
 
 
 def with_small_loops(flags: str, threshold: int = SMALL_LOOP_BYTES) -> str | None:
     """``flags`` (an ``XLA_FLAGS`` value) with ``OPTION=threshold`` added to its backend
     options, or None where ``flags`` already sets ``OPTION`` (the user's choice stands)."""
+    if any(key == OPTION for key, _ in _backend_options(flags)):
+        return None
     tokens = flags.split()
     extras = [k for k, token in enumerate(tokens) if token.startswith(_EXTRA)]
-    if any(entry.split("=", 1)[0] == OPTION for k in extras for entry in tokens[k][len(_EXTRA):].split(",")):
-        return None
     setting = f"{OPTION}={threshold}"
     if extras:  # XLA keeps the last occurrence of a flag: extend that one
         last = extras[-1]
@@ -45,6 +55,12 @@ def with_small_loops(flags: str, threshold: int = SMALL_LOOP_BYTES) -> str | Non
     else:
         tokens.append(_EXTRA + setting)
     return " ".join(tokens)
+
+
+def threshold_in(flags: str) -> int | None:
+    """The threshold an ``XLA_FLAGS`` value sets (its last setting; None if none or not an integer)."""
+    values = [value for key, value in _backend_options(flags) if key == OPTION]
+    return int(values[-1]) if values and values[-1].strip().isdigit() else None
 
 
 def _backend_started() -> bool:
@@ -63,16 +79,24 @@ def apply_small_loops(environ=os.environ) -> str:
     flags = environ.get("XLA_FLAGS", "")
     updated = with_small_loops(flags)
     if updated is None:
-        return "yours: XLA_FLAGS sets " + OPTION
+        if threshold_in(flags) == SMALL_LOOP_BYTES:  # e.g. inherited from a parent process that imported jaxsplit
+            return _ON
+        return f"yours: XLA_FLAGS sets {OPTION}={threshold_in(flags)}"
     if _backend_started():
         return "off: JAX's backend started before jaxsplit was imported (XLA's default, 1 KiB)"
     environ["XLA_FLAGS"] = updated
-    return f"on: loops touching < {SMALL_LOOP_BYTES // 2**10} KiB per iteration compile to one kernel"
+    return _ON
 
 
 def small_loop_setting() -> str:
-    """Whether XLA compiles jaxsplit's small loops as one kernel: ``"on: …"`` (set at import),
-    ``"yours: …"`` (your ``XLA_FLAGS`` set it) or ``"off: …"`` (the backend had started)."""
+    """Whether XLA compiles jaxsplit's small loops as one kernel: ``"on: …"`` (set at import,
+    or already in ``XLA_FLAGS``), ``"yours: …"`` (your ``XLA_FLAGS`` set another threshold) or
+    ``"off: …"`` (JAX's backend had started before ``import jaxsplit``).
+
+    >>> import jaxsplit
+    >>> jaxsplit.small_loop_setting()      # in a fresh process, before any JAX computation
+    'on: loops touching < 64 KiB per iteration compile to one kernel'
+    """
     if not _STATE:
         _STATE.append(apply_small_loops())
     return _STATE[0]

@@ -7,7 +7,7 @@ import pytest
 
 import jaxsplit
 from jaxsplit import _xla_cpu
-from jaxsplit._xla_cpu import OPTION, SMALL_LOOP_BYTES, apply_small_loops, with_small_loops
+from jaxsplit._xla_cpu import OPTION, SMALL_LOOP_BYTES, apply_small_loops, threshold_in, with_small_loops
 
 SETTING = f"{OPTION}={SMALL_LOOP_BYTES}"
 
@@ -48,9 +48,18 @@ def _one_kernel(bodies: int) -> bool:
     return "xla_cpu_small_call" in compiled.as_text()
 
 
+def test_the_threshold_is_read_back_from_the_flags():
+    assert threshold_in(with_small_loops("--a=1")) == SMALL_LOOP_BYTES
+    assert threshold_in(f"--xla_backend_extra_options={OPTION}=1 --xla_backend_extra_options={OPTION}=7") == 7
+    assert threshold_in("--xla_backend_extra_options=a=1") is None and threshold_in("") is None
+    assert apply_small_loops({"XLA_FLAGS": with_small_loops("")}).startswith("on")  # a child of a jaxsplit process
+
+
 def test_small_loops_compile_to_one_kernel_and_large_batches_do_not():
-    assert jaxsplit.small_loop_setting().startswith(("on", "yours"))  # conftest imports jaxsplit before JAX starts
-    if jaxsplit.small_loop_setting().startswith("yours"):
-        pytest.skip("XLA_FLAGS sets the threshold: the user's choice, not jaxsplit's")
+    # conftest imports jaxsplit before JAX starts (xdist's workers inherit the parent's XLA_FLAGS)
+    setting = jaxsplit.small_loop_setting()
+    if setting.startswith("yours"):
+        pytest.skip(f"XLA_FLAGS sets another threshold: the user's choice ({setting})")
+    assert setting.startswith("on"), setting
     assert _one_kernel(256)
     assert not _one_kernel(100_000)  # one kernel would lose XLA's threads (benchmarks/results/small_loops.md)
