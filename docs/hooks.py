@@ -38,6 +38,7 @@ def public_names() -> dict[str, list[str]]:
     for node in ast.walk(tree):
         if isinstance(node, ast.ImportFrom) and node.level == 1 and node.module:
             area = node.module.split(".")[0]
+            area = "core" if area.startswith("_") else area  # the package's own top-level modules (_xla_cpu)
             if area in areas:
                 areas[area] += [alias.asname or alias.name for alias in node.names]
     return areas

@@ -24,6 +24,7 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 if typing.TYPE_CHECKING:
+    from ._xla_cpu import small_loop_setting as small_loop_setting
     from . import systems as systems
     from .checks._invariants import InvariantErrors as InvariantErrors
     from .checks._invariants import invariant_errors as invariant_errors
@@ -155,6 +156,12 @@ def __getattr__(name: str):
 def __dir__():
     return sorted({*globals(), *_public()})
 
+
+# Before JAX starts its backend: XLA compiles small loops (one body, a few hundred) as one kernel
+# (``_xla_cpu``; a millisecond, no JAX import).
+from ._xla_cpu import small_loop_setting  # noqa: E402
+
+small_loop_setting()
 
 try:
     __version__ = version("jaxsplit")

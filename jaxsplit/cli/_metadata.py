@@ -3,6 +3,7 @@ its arrays, and JSON on stdout (non-finite numbers become ``null``, never invali
 
 import json
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -57,5 +58,6 @@ def run_metadata(command: str, argv=None) -> dict:
         "numpy_version": np.__version__,
         "python_version": platform.python_version(),
         "dtype": "float64",
+        "xla_flags": os.environ.get("XLA_FLAGS", ""),  # results are bit-reproducible per flag set
         "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
     }
