@@ -157,7 +157,7 @@ def __dir__():
     return sorted({*globals(), *_public()})
 
 
-# Before JAX starts its backend: XLA compiles small loops (one body, a few hundred) as one kernel
+# Before JAX starts its backend: XLA compiles small loops (one body, a top, a few bodies) as one kernel
 # (``_xla_cpu``; a millisecond, no JAX import).
 from ._xla_cpu import small_loop_setting  # noqa: E402
 

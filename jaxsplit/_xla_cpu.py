@@ -6,7 +6,7 @@ iteration, unless one iteration touches fewer bytes than its option
 compiled kernel. A composition step on one body, a heavy top or a few bodies is dozens of
 tiny fused operations, so under the default their dispatch, not the arithmetic, sets the
 time (``benchmarks/results/small_loops.md``: a heavy top's reversible gradient over 10⁵
-steps 3.1× faster, one body with Kahan–Li 8 1.2× faster). On hundreds of bodies each fused
+steps 2.2× faster, one body with Kahan–Li 8 1.6× faster; 3.1× and 1.2× in an earlier run). On hundreds of bodies each fused
 operation has enough work to hide its dispatch: one kernel ran no faster and compiled up to
 a third longer, and on 10⁵ bodies it loses XLA's multi-threading. Hence the bound below:
 64 KiB per iteration, one body or a top with any scheme, up to ~50 bodies with an
@@ -22,13 +22,13 @@ after 2,000 steps: another, equally rounded sin/cos), so bit-reproducibility is 
 and the command line records ``XLA_FLAGS`` with every run.
 """
 
+import functools
 import os
 import sys
 
 OPTION = "xla_cpu_small_while_loop_byte_threshold"
 SMALL_LOOP_BYTES = 64 * 2**10
 _EXTRA = "--xla_backend_extra_options="
-_STATE: list[str] = []  # what the import did: one entry
 _ON = f"on: loops touching < {SMALL_LOOP_BYTES // 2**10} KiB per iteration compile to one kernel"
 
 
@@ -79,15 +79,15 @@ def apply_small_loops(environ=os.environ) -> str:
     flags = environ.get("XLA_FLAGS", "")
     updated = with_small_loops(flags)
     if updated is None:
-        if threshold_in(flags) == SMALL_LOOP_BYTES:  # e.g. inherited from a parent process that imported jaxsplit
-            return _ON
-        return f"yours: XLA_FLAGS sets {OPTION}={threshold_in(flags)}"
+        own = threshold_in(flags)
+        return _ON if own == SMALL_LOOP_BYTES else f"yours: XLA_FLAGS sets {OPTION}={own}"  # ours: inherited
     if _backend_started():
         return "off: JAX's backend started before jaxsplit was imported (XLA's default, 1 KiB)"
     environ["XLA_FLAGS"] = updated
     return _ON
 
 
+@functools.cache  # applied once, at import
 def small_loop_setting() -> str:
     """Whether XLA compiles jaxsplit's small loops as one kernel: ``"on: …"`` (set at import,
     or already in ``XLA_FLAGS``), ``"yours: …"`` (your ``XLA_FLAGS`` set another threshold) or
@@ -97,6 +97,4 @@ def small_loop_setting() -> str:
     >>> jaxsplit.small_loop_setting()      # in a fresh process, before any JAX computation
     'on: loops touching < 64 KiB per iteration compile to one kernel'
     """
-    if not _STATE:
-        _STATE.append(apply_small_loops())
-    return _STATE[0]
+    return apply_small_loops()
