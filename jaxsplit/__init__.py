@@ -24,6 +24,7 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 if typing.TYPE_CHECKING:
+    from ._xla_cpu import compiler_options as compiler_options
     from ._xla_cpu import small_loop_setting as small_loop_setting
     from . import systems as systems
     from .checks._invariants import InvariantErrors as InvariantErrors

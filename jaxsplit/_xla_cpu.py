@@ -1,4 +1,5 @@
-"""XLA's CPU runtime and small loops: one setting, applied when jaxsplit is imported.
+"""XLA's CPU settings: small loops as one kernel (set when jaxsplit is imported) and wide
+vectors for jaxsplit's own programs (``compiler_options``, ``jit``; end of this module).
 
 XLA runs a ``while`` loop on the CPU as one dispatched kernel per fused operation per
 iteration, unless one iteration touches fewer bytes than its option
@@ -98,3 +99,63 @@ def small_loop_setting() -> str:
     'on: loops touching < 64 KiB per iteration compile to one kernel'
     """
     return apply_small_loops()
+
+
+# ------------------------------------------------------------------ vector width, per program
+# XLA's CPU code generator asks LLVM for 256-bit vectors even where the CPU has 512-bit ones (a
+# hedge against the clock slow-down of wide instructions on older server chips). A batch laid out
+# components-first is long elementwise loops, which 512-bit vectors run faster
+# (``benchmarks/results/vector_width.md``): Kahan–Li 8 / McLachlan SS15 on 16 to 4096 bodies 1.4–1.5×,
+# one body, a heavy top and its gradient, and 10⁵ bodies unchanged, results bit-identical. Unlike the
+# small-loop option this one is a plain compiler option, so it is set per program, on jaxsplit's own.
+VECTOR_OPTION = "xla_cpu_prefer_vector_width"
+VECTOR_BITS = 512
+
+
+@functools.cache
+def compiler_options() -> dict:
+    """The XLA compiler options of jaxsplit's own compiled runs (``integrate``, sweeps, order
+    fits): ``{"xla_cpu_prefer_vector_width": 512}`` on the CPU backend, ``{}`` on others or where
+    your ``XLA_FLAGS`` sets the width (yours stands). On a CPU without 512-bit vectors LLVM uses
+    the widest it has. Pass it to your own ``jax.jit`` around jaxsplit steps for the same code:
+    ``jax.jit(f, compiler_options=jaxsplit.compiler_options())``. Starts JAX's backend.
+
+    >>> import jax, jaxsplit
+    >>> jaxsplit.compiler_options() == ({"xla_cpu_prefer_vector_width": 512} if jax.default_backend() == "cpu" else {})
+    True
+    """
+    import jax
+
+    if f"--{VECTOR_OPTION}=" in os.environ.get("XLA_FLAGS", "") or jax.default_backend() != "cpu":
+        return {}
+    return {VECTOR_OPTION: VECTOR_BITS}
+
+
+def _top_level() -> bool:
+    """No trace is active (JAX refuses compiler options on a ``jit`` nested in any trace)."""
+    try:
+        from jax._src import core
+        return bool(core.trace_state_clean())
+    except (ImportError, AttributeError):  # a JAX without this query: never pass the options
+        return False
+
+
+def jit(fun=None, **jit_kwargs):
+    """``jax.jit(fun, **jit_kwargs)`` with ``compiler_options()`` where it is called at top level;
+    inside ``jit``, ``grad`` or ``vmap`` the plain ``jax.jit`` (JAX takes compiler options on
+    top-level programs only; there the outer program's options apply). Built at the first call:
+    the backend is known only then, and importing jaxsplit must not start it."""
+    if fun is None:
+        return functools.partial(jit, **jit_kwargs)
+    built = {}
+
+    @functools.wraps(fun)
+    def call(*args, **kwargs):
+        top = _top_level()
+        if top not in built:
+            import jax
+
+            built[top] = jax.jit(fun, compiler_options=(compiler_options() or None) if top else None, **jit_kwargs)
+        return built[top](*args, **kwargs)
+
+    return call

@@ -10,13 +10,13 @@ optionally, step sizes below ``max_step`` (for compositions with large weights t
 asymptotic regime is set by the largest sub-step |w| h, not by the error).
 """
 
-import functools
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._xla_cpu import jit
 from ..core._compose import Composition
 from ..core._errors import InputError
 from ..core._flows import join_parameters, split_parameters
@@ -101,7 +101,7 @@ def global_errors(step, x0, t_end: float, counts, reference):
     return np.asarray(hs), np.asarray(errors)
 
 
-@functools.partial(jax.jit, static_argnames=("static", "n_steps"))
+@jit(static_argnames=("static", "n_steps"))
 def _saved_run(parameters, static, x0, h, n_steps: int):
     """Every state of ``n_steps`` steps; ``h`` is traced here, so the step keeps the kernel it was
     given (the largest step's) and one compilation serves the ladder, and any other ladder of

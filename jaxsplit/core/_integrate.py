@@ -21,7 +21,6 @@ merges sub-flows across step boundaries. ``adjoint`` chooses what reverse mode s
 (``_adjoints``).
 """
 
-import functools
 import math
 from typing import Any
 
@@ -30,6 +29,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._xla_cpu import jit
 from ._adjoints import advance, advance_checkpointed, check_adjoint
 from ._compose import Composition
 from ._errors import InputError
@@ -110,7 +110,7 @@ def _one(x):
     return jax.tree_util.tree_map(lambda a: a[None], x)
 
 
-@functools.partial(jax.jit, static_argnames=("static", "n_steps", "save_every", "adjoint"))
+@jit(static_argnames=("static", "n_steps", "save_every", "adjoint"))
 def _run(parameters, static, x0, h, t0, n_steps: int, save_every: int | None, adjoint: str):
     _TRACES[0] += 1  # runs only while tracing
     step = join_parameters(parameters, static)
@@ -138,7 +138,7 @@ def _run(parameters, static, x0, h, t0, n_steps: int, save_every: int | None, ad
     return Solution(t, xs, h, _finite(xs), n_steps, _scheme_name(step), getattr(step, "kernel", None))
 
 
-@functools.partial(jax.jit, static_argnames=("static", "adjoint"))
+@jit(static_argnames=("static", "adjoint"))
 def _run_at(parameters, static, x0, h, t0, ts, adjoint: str):
     """States at the times ``ts``: full grid steps, then a partial step from the grid state."""
     _TRACES[0] += 1
