@@ -7,7 +7,8 @@ for the adaptive ones, whose error control then watches the worst body). Error =
 bodies of |m(T) − reference|, the reference by Kahan–Li 10 with sub-step angles <= 0.01.
 Work = wall time of one call (median of interleaved rounds): jaxsplit as a user calls
 ``integrate`` (dispatch included), diffrax behind ``jax.jit`` with the tolerance or step
-traced, scipy ``solve_ivp`` on the 768 components. Time to reach 1e-6 and 1e-8 is
+traced and jaxsplit's compiler options (``jaxsplit.compiler_options()``, 512-bit vectors: the
+same code generation for both; ``vector_width.py``: diffrax's Dopri8 gains 1.1× from it), scipy ``solve_ivp`` on the 768 components. Time to reach 1e-6 and 1e-8 is
 interpolated log-log between measured points; ``auto`` is ``jaxsplit.auto_splitting``'s
 choice for that tolerance (its pilot time reported apart).
 
@@ -46,6 +47,9 @@ SPLITTINGS = {  # step counts over T = 10³ (h = 10³/n), bracketing 1e-6 and 1e
     "blanes-moan-s6-prk": (2560, 5000, 10000, 20000, 40000, 80000), "strang": (16000, 64000, 256000)}
 
 
+OPTIONS = jaxsplit.compiler_options() or None  # diffrax compiled as jaxsplit's own programs are
+
+
 def states():
     m = np.random.default_rng(0).standard_normal((256, 3))
     return m / np.linalg.norm(m, axis=1, keepdims=True)
@@ -72,7 +76,7 @@ def diffrax_cases(body, m0, quick):
     cases = []
     solvers = {"Tsit5": (diffrax.Tsit5(), 5), "Dopri5": (diffrax.Dopri5(), 5), "Dopri8": (diffrax.Dopri8(), 8)}
     for name, (solver, order) in solvers.items():
-        @jax.jit
+        @jax.jit(compiler_options=OPTIONS)
         def adaptive(y0, tol, solver=solver):
             controller = diffrax.PIDController(rtol=tol, atol=tol)
             return diffrax.diffeqsolve(term, solver, 0.0, T_END, None, y0, stepsize_controller=controller,
@@ -83,7 +87,7 @@ def diffrax_cases(body, m0, quick):
                           lambda f=adaptive, tol=tol: f(m0, jnp.asarray(tol)).block_until_ready()))
         counts = (4000, 8000, 16000, 32000) if order == 5 else (1000, 2000, 4000, 8000)
         for n in counts[::2] if quick else counts:
-            @jax.jit
+            @jax.jit(compiler_options=OPTIONS)
             def fixed(y0, dt, solver=solver, n=n):
                 return diffrax.diffeqsolve(term, solver, 0.0, T_END, dt, y0, max_steps=n + 1).ys[-1]
 
