@@ -57,12 +57,16 @@ def ready(fn, *args):
 
 
 def time_to_reach(points, target: float):
-    """Log-log interpolated time at which (error, time) points reach error ``target`` (None if not bracketed)."""
-    pts = sorted((e, t) for e, t in points if e > 0)
-    for (e_lo, t_lo), (e_hi, t_hi) in itertools.pairwise(pts):
-        if e_lo <= target <= e_hi:
-            w = (math.log(target) - math.log(e_hi)) / (math.log(e_lo) - math.log(e_hi))
-            return math.exp(math.log(t_hi) + w * (math.log(t_lo) - math.log(t_hi)))
+    """The least time at which (error, time) points reach error ``target``: walking the points in
+    order of time, the first step from above ``target`` to at or below it, interpolated log-log
+    (None if never crossed). Near the round-off floor errors stop falling with cost; sorting by
+    error instead paired points that are not neighbours in cost (Sofroniou–Spaletta 10 at 1e-8:
+    its 1250- and 2500-step runs, 57 ms, skipping the 1800-step run that reached 7.5e-10 in 63 ms)."""
+    pts = sorted((t, e) for e, t in points if e > 0)
+    for (t_lo, e_lo), (t_hi, e_hi) in itertools.pairwise(pts):
+        if e_hi <= target < e_lo:
+            w = (math.log(target) - math.log(e_lo)) / (math.log(e_hi) - math.log(e_lo))
+            return math.exp(math.log(t_lo) + w * (math.log(t_hi) - math.log(t_lo)))
     return None
 
 

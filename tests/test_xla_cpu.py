@@ -11,7 +11,7 @@ from jaxsplit import _xla_cpu
 from jaxsplit._xla_cpu import OPTION, SMALL_LOOP_BYTES, apply_small_loops, threshold_in, with_small_loops
 
 SETTING = f"{OPTION}={SMALL_LOOP_BYTES}"
-ROUNDOFF = 1e-13  # another kernel or layout: the same map, rounded differently (50 steps of 18 rotations)
+ROUNDOFF = 1e-13  # another kernel or layout: the same map, rounded differently (50 steps of 2 rotations)
 
 
 @pytest.mark.parametrize("flags, expected", [
@@ -97,7 +97,7 @@ def test_the_options_go_to_top_level_programs_only(monkeypatch):
 def test_integrate_runs_in_every_context_and_the_width_leaves_results_bit_identical():
     body = jaxsplit.RigidBody(jnp.array([2.0, 1.0, 2.0 / 3.0]))
     m0 = jax.random.normal(jax.random.PRNGKey(0), (64, 3))
-    step = jaxsplit.splitting(body, "kahan-li-6", "casimir")
+    step = jaxsplit.splitting(body, "strang", "casimir")
     fast = step.for_run(m0, 0.1)  # what integrate runs: the polynomial kernel, components first
     run = lambda m: fast.advance(m, 0.1, 50)
     wide = jax.jit(run, compiler_options=jaxsplit.compiler_options() or None)(m0)
