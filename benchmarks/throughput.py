@@ -13,6 +13,9 @@ order, checked to agree to round-off):
   written inline, with XLA's cos/sin, and with the library's polynomial;
 * NumPy: the same algebra vectorised over the batch in a Python loop (``np.cos``/``np.sin``).
 
+Every JAX contender is compiled with jaxsplit's compiler options (``jaxsplit.compiler_options()``,
+512-bit vectors), as ``integrate``'s own programs are: the same code generation for all.
+
     python benchmarks/throughput.py [--quick]
 
 Writes ``benchmarks/results/throughput.{md,json}``.
@@ -75,7 +78,10 @@ def fused_run(n, cos_sin):
         c, s = cos_sin(C0 * h / 2 * x)
         return jnp.stack([x, c * y + s * z, -s * y + c * z], axis=-1)
 
-    return jax.jit(run)
+    return jax.jit(run, compiler_options=OPTIONS)
+
+
+OPTIONS = jaxsplit.compiler_options() or None
 
 
 def polynomial(angle):
@@ -97,7 +103,7 @@ def main(argv=None):
         n = max(20, total // b)
         m = jnp.asarray(states(b))
         n_numpy = max(20, n // 10) if b < 1000 else n
-        general = jax.jit(lambda x, n=n: jaxsplit.integrate(step, x, H, n).final)
+        general = jax.jit(lambda x, n=n: jaxsplit.integrate(step, x, H, n).final, compiler_options=OPTIONS)
         cases = {
             "jaxsplit": lambda m=m, n=n: jaxsplit.integrate(step, m, H, n).final.block_until_ready(),
             "jaxsplit, general kernel, (B, 3) layout": ready(general, m),
