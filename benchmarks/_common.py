@@ -107,6 +107,12 @@ def header(out: dict, title: str) -> list[str]:
             f"with {out.get('compiler_options') or 'XLA defaults'}."), ""]
 
 
+def finish(stem: str, out: dict, lines: list[str], start: float, quick: bool = False):
+    """Record the wall time since ``start`` (``time.perf_counter()``) and ``write`` the results."""
+    out["wall_s"] = time.perf_counter() - start
+    write(stem, quick, out, lines + ["", f"Total wall time {out['wall_s']:.0f} s."])
+
+
 def write(stem: str, quick: bool, out: dict, lines: list[str]):
     """``results/<stem>{-quick}.{json,md}``; the table is printed too."""
     RESULTS.mkdir(exist_ok=True)

@@ -50,7 +50,7 @@ print(json.dumps({"first_s": first, "run_s": time.perf_counter() - t0, "sub_flow
 def main():
     argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()
     sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from _common import header, log, machine_info, write
+    from _common import finish, header, log, machine_info
 
     out = machine_info("python benchmarks/compile_time.py")
     start = time.perf_counter()
@@ -69,9 +69,7 @@ def main():
         lines.append(f"| {scheme} | {split} | {r['sub_flows_per_step']} | {r['first_s']:.2f} s | {r['trace_s']:.2f} s | "
                      f"{r['lower_s']:.2f} s | {r['compile_s']:.2f} s | {r['run_s'] * 1e3:.0f} ms |")
         log(lines[-1])
-    out["wall_s"] = time.perf_counter() - start
-    lines += ["", f"Total wall time {out['wall_s']:.0f} s."]
-    write("compile_time", False, out, lines)
+    finish("compile_time", out, lines, start)
 
 
 if __name__ == "__main__":

@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxsplit
-from _common import fmt, header, interleaved, log, machine_info, paired_ratio, write
+from _common import finish, fmt, header, interleaved, log, machine_info, paired_ratio
 
 jax.config.update("jax_enable_x64", True)
 WIDE = {"xla_cpu_prefer_vector_width": 512}
@@ -90,9 +90,7 @@ def main():
         lines.append(f"| {name} | {fmt(entry['run_s']['256'])} | {fmt(entry['run_s']['512'])} | "
                      f"{entry['speed_up']:.2f}× | {compile_s['256']:.2f} / {compile_s['512']:.2f} s | {'yes' if same else 'no'} |")
         log(lines[-1])
-    out["wall_s"] = time.perf_counter() - start
-    lines += ["", f"Total wall time {out['wall_s']:.0f} s."]
-    write("vector_width", False, out, lines)
+    finish("vector_width", out, lines, start)
 
 
 if __name__ == "__main__":
