@@ -42,7 +42,7 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp
 import numpy as np
-from _common import header, interleaved, log, machine_info, write
+from _common import finish, header, interleaved, log, machine_info
 
 import jaxsplit
 from jaxsplit.core._adjoints import advance
@@ -278,9 +278,7 @@ def main(argv=None):
     for r in fit_rows:
         lines.append(f"| {r['variant']} | {r['gradient_s'] * 1e3:.3g} ms | {r['time_vs_fit_today']:.2f} | "
                      f"{r['compile_s']:.2g} s | {r['vs_fit_today']:.0e} |")
-    out["wall_s"] = time.perf_counter() - start
-    lines += ["", f"Total wall time {out['wall_s']:.0f} s."]
-    write("gradients", quick, out, lines)
+    finish("gradients", out, lines, start, quick)
 
 
 if __name__ == "__main__":

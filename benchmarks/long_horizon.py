@@ -27,7 +27,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
-from _common import RESULTS, header, interleaved, log, machine_info, scheme_label, write
+from _common import RESULTS, finish, header, interleaved, log, machine_info, scheme_label
 
 import jaxsplit
 
@@ -117,9 +117,7 @@ def main(argv=None):
         errs = ([f"{r[k]:.2e}" for k in ("max_energy_error", "energy_error_at_T/10", "final_energy_error")]
                 + [f"{r['max_casimir_error']:.1e}"]) if r["finite"] else ["diverged (not finite)", "—", "—", "—"]
         lines.append(f"| {r['method']} | {r['time_s']:.3g} s | {r['time_vs_splitting']:.2f} | " + " | ".join(errs) + " |")
-    out["wall_s"] = time.perf_counter() - start
-    lines += ["", f"Total wall time {out['wall_s']:.0f} s."]
-    write("long_horizon", quick, out, lines)
+    finish("long_horizon", out, lines, start, quick)
 
 
 if __name__ == "__main__":

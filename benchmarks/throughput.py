@@ -31,7 +31,7 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp
 import numpy as np
-from _common import header, interleaved, log, machine_info, paired_ratio, ready, write
+from _common import finish, header, interleaved, log, machine_info, paired_ratio, ready
 
 import jaxsplit
 from jaxsplit.systems import so3
@@ -139,9 +139,7 @@ def main(argv=None):
         cells = [next(f"{r['body_steps_per_s'] / 1e6:.3g} ({r['speedup_vs_numpy']:.2g}×)" for r in rows
                       if r["B"] == b and r["method"] == name) for b in BATCHES]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    out["wall_s"] = time.perf_counter() - start
-    lines += ["", f"Total wall time {out['wall_s']:.0f} s."]
-    write("throughput", quick, out, lines)
+    finish("throughput", out, lines, start, quick)
 
 
 if __name__ == "__main__":

@@ -32,7 +32,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
-from _common import RESULTS, header, interleaved, log, machine_info, scheme_label, time_to_reach, write
+from _common import RESULTS, finish, header, interleaved, log, machine_info, scheme_label, time_to_reach
 from scipy.integrate import solve_ivp
 
 import jaxsplit
@@ -209,11 +209,9 @@ def main(argv=None):
     for a in auto:
         lines.append(f"| {a['body']} | {a['tol']:.0e} | {scheme_label(a['scheme'])}, {a['split']} split | {a['n_steps']} | "
                      f"{a['error']:.2e} | {a['time_s'] * 1e3:.3g} ms | {a['pilot_s']:.2g} s |")
-    out["wall_s"] = time.perf_counter() - start
-    lines += ["", f"Total wall time {out['wall_s']:.0f} s."]
     RESULTS.mkdir(exist_ok=True)
     plot(rows, RESULTS / f"work_precision{'-quick' if quick else ''}.png")
-    write("work_precision", quick, out, lines)
+    finish("work_precision", out, lines, start, quick)
 
 
 if __name__ == "__main__":
