@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import jaxsplit
+from jaxsplit.core._flows import split_parameters, sum_to_shape
 
 GRADIENT_RTOL = 1e-8  # reversible vs stored gradient (round-off of the rebuilt states)
 FUSED_ROUNDOFF = 1e-14  # fused step_back vs the generic jax.vjp one, per call
@@ -81,8 +82,11 @@ ROTATED = {  # (parts, state, components first)
 @jax.jit
 def _pullbacks(flow, x, t, ct):
     """(the fused ``step_back``, the generic ``jax.vjp`` one) of ``flow``: one compiled program
-    (op-by-op dispatch of both cost more than compiling them together)."""
-    return flow.step_back(x, t, ct), jaxsplit.AbstractFlow.step_back(flow, x, t, ct)
+    (op-by-op dispatch of both cost more than compiling them together). The fused one may leave
+    its parameter and time cotangents per state (the caller sums them): summed here as ``retrace`` does."""
+    x_before, ct_x, ct_parameters, ct_t = flow.step_back(x, t, ct)
+    summed = [None if c is None else sum_to_shape(c, jnp.shape(p)) for c, p in zip(ct_parameters, split_parameters(flow)[0])]
+    return (x_before, ct_x, summed, jnp.sum(ct_t)), jaxsplit.AbstractFlow.step_back(flow, x, t, ct)
 
 
 @pytest.mark.parametrize("case", ROTATED)

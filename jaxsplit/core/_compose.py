@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._errors import InputError
-from ._flows import AbstractFlow, as_flow, split_parameters
+from ._flows import AbstractFlow, as_flow, split_parameters, sum_to_shape
 from ._schemes import Scheme, schemes
 from ._state import float_dtype
 
@@ -207,20 +207,22 @@ class Composition(AbstractFlow):
         if self.structure_of_arrays:
             x_after, ct_after = _components_first(x_after), _components_first(ct_after)
         h = _like_state(h, x_after)
-        zeros = tuple(jax.tree_util.tree_map(jnp.zeros_like, split_parameters(f)[0]) for f in self.flows)
+        # one accumulator per flow, shaped as its step_back returns them (per state for a batch:
+        # summed once at the end; a sum over the batch at every sub-flow cost 5 kernels a step)
+        given = jax.eval_shape(lambda x, ct: [f.step_back(x, h, ct)[2:] for f in self.flows], x_after, ct_after)
+        zeros = tuple(jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), g) for g in given)
 
         def back(sub_flows):
             def run(carry):
-                x, ct, acc, ct_h = carry
+                x, ct, acc = carry
                 acc = list(acc)
                 for piece, weight in reversed(sub_flows):
                     x, ct, dp, dt = self.flows[piece].step_back(x, weight * h, ct)
-                    acc[piece] = jax.tree_util.tree_map(jnp.add, acc[piece], dp)
-                    ct_h = ct_h + weight * dt
+                    acc[piece] = jax.tree_util.tree_map(jnp.add, acc[piece], (dp, weight * dt))
                     # as in _apply: keeps XLA from fusing (and recomputing) a whole word; without it a
                     # Sofroniou–Spaletta 10 gradient (Casimir split) did not finish in 5 minutes
                     x, ct, acc = jax.lax.optimization_barrier((x, ct, acc))
-                return x, ct, tuple(acc), ct_h
+                return x, ct, tuple(acc)
             return run
 
         static = isinstance(n, int)
@@ -234,15 +236,17 @@ class Composition(AbstractFlow):
                 carry = jax.lax.fori_loop(0, n, lambda _, c: back(body)(c), carry)
             return back(head)(carry)
 
-        carry = (x_after, ct_after, zeros, jnp.zeros_like(h))
+        carry = (x_after, ct_after, zeros)
         if static:
             carry = walk(carry) if n else carry
         else:
             carry = jax.lax.cond(n > 0, walk, lambda c: c, carry)
-        x, ct, acc, ct_h = carry
+        x, ct, acc = carry
         if self.structure_of_arrays:
             x, ct = _components_last(x), _components_last(ct)
-        return x, ct, [entry for flow_cts in acc for entry in flow_cts], ct_h
+        ct_parameters = [None if entry is None else sum_to_shape(entry, jnp.shape(p))
+                         for f, (dp, _) in zip(self.flows, acc) for entry, p in zip(dp, split_parameters(f)[0])]
+        return x, ct, ct_parameters, sum(jnp.sum(dt) for _, dt in acc).astype(h.dtype)
 
     def advance(self, state, h, n):
         """``n`` steps, merging the last sub-flow of each step with the first of the next.

@@ -104,7 +104,10 @@ class AbstractFlow(eqx.Module):
         """One call of the reversible adjoint's backward pass: the state before this flow,
         x = φ_{−t}(x_after), and the cotangent ``ct_after`` pulled back through φ_t at x:
         ``(x, ct_x, ct_parameters, ct_t)`` with ``ct_parameters`` one entry per leaf of the
-        flow (``split_parameters`` order, ``None`` where a leaf is not a parameter).
+        flow (``split_parameters`` order, ``None`` where a leaf is not a parameter). An entry
+        may keep the axes a leaf was broadcast along (a batch of states), and ``ct_t`` may be
+        one value per state: the caller sums them (``sum_to_shape``) once, after the last step,
+        instead of reducing over the batch at every sub-flow.
 
         Default: φ_{−t} and ``jax.vjp`` of one call. A flow can fuse both (a rotation shares
         its cos and sin between the inverse and the pullback; its angle is unchanged)."""
@@ -113,6 +116,12 @@ class AbstractFlow(eqx.Module):
         _, pullback = jax.vjp(lambda p, y, s: join_parameters(p, static)(y, s), parameters, x, t)
         ct_parameters, ct_x, ct_t = pullback(ct_after)
         return x, ct_x, ct_parameters, ct_t
+
+
+def sum_to_shape(a, shape):
+    """``a`` summed over the axes it was broadcast along from ``shape`` (a parameter's cotangent)."""
+    a = jnp.sum(a, axis=tuple(range(a.ndim - len(shape))))
+    return jnp.sum(a, axis=tuple(q for q, size in enumerate(shape) if size == 1), keepdims=True).reshape(shape)
 
 
 def _is_none(leaf) -> bool:
