@@ -81,6 +81,28 @@ def _like_state(h, state):
     return jnp.asarray(h, dtype=float_dtype(state))
 
 
+def _joint_layout(state, cotangent):
+    """(pack, unpack) for the reversible adjoint's carry: the state and its cotangent as ONE
+    array (their leaves stacked) when every leaf has one shape and dtype, else the pair as it is.
+
+    Why: XLA writes each output array of a sub-flow with a kernel of its own; as one array,
+    a rotation turns the state and the cotangent in one kernel instead of one per leaf
+    (bit-identical; 10³ heavy tops: gradient / forward 2.5× → 2.0×; 10³ free bodies 2.4× → 2.1×;
+    one state: unchanged)."""
+    leaves, treedef = jax.tree_util.tree_flatten(state)
+    if len({(jnp.shape(leaf), jnp.result_type(leaf)) for leaf in leaves + jax.tree_util.tree_leaves(cotangent)}) != 1:
+        return (lambda x, ct: (x, ct)), (lambda joint: joint)
+    size = len(leaves)
+
+    def pack(x, ct):
+        return jnp.stack(jax.tree_util.tree_leaves(x) + jax.tree_util.tree_leaves(ct))
+
+    def unpack(joint):
+        return tuple(jax.tree_util.tree_unflatten(treedef, list(joint[k * size:(k + 1) * size])) for k in (0, 1))
+
+    return pack, unpack
+
+
 def _components_first(state):
     return jnp.moveaxis(state, -1, 0)
 
@@ -212,17 +234,20 @@ class Composition(AbstractFlow):
         given = jax.eval_shape(lambda x, ct: [f.step_back(x, h, ct)[2:] for f in self.flows], x_after, ct_after)
         zeros = tuple(jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), g) for g in given)
 
+        pack, unpack = _joint_layout(x_after, ct_after)
+
         def back(sub_flows):
             def run(carry):
-                x, ct, acc = carry
+                joint, acc = carry
                 acc = list(acc)
                 for piece, weight in reversed(sub_flows):
+                    x, ct = unpack(joint)
                     x, ct, dp, dt = self.flows[piece].step_back(x, weight * h, ct)
                     acc[piece] = jax.tree_util.tree_map(jnp.add, acc[piece], (dp, weight * dt))
                     # as in _apply: keeps XLA from fusing (and recomputing) a whole word; without it a
                     # Sofroniou–Spaletta 10 gradient (Casimir split) did not finish in 5 minutes
-                    x, ct, acc = jax.lax.optimization_barrier((x, ct, acc))
-                return x, ct, tuple(acc)
+                    joint, acc = jax.lax.optimization_barrier((pack(x, ct), acc))
+                return joint, tuple(acc)
             return run
 
         static = isinstance(n, int)
@@ -236,12 +261,12 @@ class Composition(AbstractFlow):
                 carry = jax.lax.fori_loop(0, n, lambda _, c: back(body)(c), carry)
             return back(head)(carry)
 
-        carry = (x_after, ct_after, zeros)
+        carry = (pack(x_after, ct_after), zeros)
         if static:
             carry = walk(carry) if n else carry
         else:
             carry = jax.lax.cond(n > 0, walk, lambda c: c, carry)
-        x, ct, acc = carry
+        (x, ct), acc = unpack(carry[0]), carry[1]
         if self.structure_of_arrays:
             x, ct = _components_last(x), _components_last(ct)
         ct_parameters = [None if entry is None else sum_to_shape(entry, jnp.shape(p))
