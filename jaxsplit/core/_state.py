@@ -27,7 +27,9 @@ def float_dtype(state):
 def as_state(x0, name: str = "x0"):
     """Leaves as arrays. A state whose leaves are all integers (``m0 = [1, 0, 0]``) is
     promoted to the default float dtype; in a state with floating leaves, integer leaves
-    stay integers. Complex, boolean, empty and non-numeric states are refused."""
+    stay integers, and floating leaves of different precisions are promoted to the widest
+    (a step mixes them anyway, and a loop carries one dtype per leaf: never cast down).
+    Complex, boolean, empty and non-numeric states are refused."""
     if isinstance(x0, jax.Array) and jnp.issubdtype(x0.dtype, jnp.floating):
         return x0  # the common case, cheaply
     leaves, treedef = jax.tree_util.tree_flatten(x0)
@@ -44,8 +46,9 @@ def as_state(x0, name: str = "x0"):
         if not (jnp.issubdtype(arr.dtype, jnp.floating) or jnp.issubdtype(arr.dtype, jnp.integer)):
             raise InputError(f"{name} must be real numbers, got dtype {arr.dtype}")
         arrays.append(arr)
-    if not any(jnp.issubdtype(a.dtype, jnp.floating) for a in arrays):
-        arrays = [a.astype(jnp.result_type(float)) for a in arrays]
+    floating = [a for a in arrays if jnp.issubdtype(a.dtype, jnp.floating)]
+    common = jnp.result_type(*floating) if floating else jnp.result_type(float)
+    arrays = [a.astype(common) if jnp.issubdtype(a.dtype, jnp.floating) or not floating else a for a in arrays]
     return jax.tree_util.tree_unflatten(treedef, arrays)
 
 
