@@ -46,9 +46,10 @@ def as_state(x0, name: str = "x0"):
         if not (jnp.issubdtype(arr.dtype, jnp.floating) or jnp.issubdtype(arr.dtype, jnp.integer)):
             raise InputError(f"{name} must be real numbers, got dtype {arr.dtype}")
         arrays.append(arr)
-    floating = [a for a in arrays if jnp.issubdtype(a.dtype, jnp.floating)]
-    common = jnp.result_type(*floating) if floating else jnp.result_type(float)
-    arrays = [a.astype(common) if jnp.issubdtype(a.dtype, jnp.floating) or not floating else a for a in arrays]
+    floating = [a for a in arrays if is_floating(a)]
+    common = jnp.result_type(*floating) if floating else jnp.result_type(float)  # arrays: weak types respected
+    promote = is_floating if floating else (lambda a: True)  # no floating leaf: all become floats
+    arrays = [a.astype(common) if promote(a) and a.dtype != common else a for a in arrays]
     return jax.tree_util.tree_unflatten(treedef, arrays)
 
 
