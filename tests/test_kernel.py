@@ -49,7 +49,7 @@ def test_the_run_picks_the_kernel_from_the_casimir_bound():
         run = step.for_run(M0, h)
         for flow, reach in zip(run.flows, step.reach()):
             assert flow.angle_limit >= abs(float(flow.rate)) * m_norm * reach * h
-    terms = [len(so3._taylor("float64", step.for_run(M0, h).flows[0].angle_limit)[0]) for h in (0.01, 1.0)]
+    terms = [len(so3._polynomials("float64", step.for_run(M0, h).flows[0].angle_limit)[0]) for h in (0.01, 1.0)]
     assert terms[0] < terms[1]
     assert jaxsplit.integrate(step, M0, 0.1, 10).kernel == "polynomial"
     assert jaxsplit.integrate(step, M0, 10.0, 10).kernel == "general"
@@ -144,7 +144,7 @@ def test_the_half_angle_is_truncated_for_half_the_limit_at_full_accuracy(limit):
     eps = float(jnp.finfo(jnp.float64).eps)
     assert np.max(np.abs(c - np.cos(np.asarray(theta) / 2))) <= KERNEL_ULPS * eps
     assert np.max(np.abs(s - np.sin(np.asarray(theta) / 2))) <= KERNEL_ULPS * eps
-    assert len(so3._taylor("float64", limit / 2)[0]) < len(so3._taylor("float64", limit)[0])  # fewer terms
+    assert len(so3._polynomials("float64", limit / 2)[0]) < len(so3._polynomials("float64", limit)[0])  # fewer terms
     # must fail: the half-limit truncation used on the full angle is no longer round-off
     cf, sf = (np.asarray(a) for a in so3.cos_sin(jnp.asarray([limit]), "polynomial", limit / 4))
     assert abs(float(cf[0] ** 2 + sf[0] ** 2) - 1) > BEYOND_LIMIT_ULPS * eps

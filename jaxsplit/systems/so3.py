@@ -44,6 +44,7 @@ otherwise. For a batch of free-body states a run also moves the components first
 import dataclasses
 import functools
 import math
+from fractions import Fraction
 
 import equinox as eqx
 import jax
@@ -82,20 +83,53 @@ POLYNOMIAL_LIMITS = (0.125, 0.25, 0.5, 1.0)
 POLYNOMIAL_LIMIT = POLYNOMIAL_LIMITS[-1]
 
 
+def _chebyshev_polynomials(n: int) -> list[list[int]]:
+    """T_0 … T_n as integer monomial coefficients (T_{k+1} = 2 t T_k − T_{k−1})."""
+    out = [[1], [0, 1]]
+    while len(out) <= n:
+        doubled = [0] + [2 * a for a in out[-1]]
+        out.append([a - b for a, b in zip(doubled, out[-2] + [0, 0])])
+    return out[: n + 1]
+
+
+def _economized(offset: int, limit: float, tolerance: float, degree: int = 14) -> tuple[float, ...]:
+    """Coefficients in z = θ² of cos θ (``offset`` 0) or sin θ / θ (1) on |θ| <= ``limit``, as few
+    as keep the error below ``tolerance``: the Taylor series to ``degree`` (its remainder bounded
+    by the first omitted term, the series alternating and decreasing), re-expanded in Chebyshev
+    polynomials of z over [0, limit²], whose top terms are dropped while their summed
+    coefficients (|T_k| <= 1 there) and the remainder stay below ``tolerance``. In exact
+    rational arithmetic; only the kept coefficients are rounded."""
+    z_max = Fraction(limit) ** 2
+    taylor = [Fraction((-1) ** k, math.factorial(2 * k + offset)) for k in range(degree + 1)]
+    error = z_max ** (degree + 1) / math.factorial(2 * degree + 2 + offset)
+    # z = z_max (t + 1) / 2, t in [−1, 1]: monomials in t, then Chebyshev coefficients (top down)
+    in_t = [sum(a * (z_max / 2) ** k * math.comb(k, j) for k, a in enumerate(taylor) if k >= j)
+            for j in range(degree + 1)]
+    chebyshev = _chebyshev_polynomials(degree)
+    weights = [Fraction(0)] * (degree + 1)
+    for n in range(degree, -1, -1):
+        weights[n] = in_t[n] / chebyshev[n][n]
+        for j, a in enumerate(chebyshev[n]):
+            in_t[j] -= weights[n] * a
+    kept = degree
+    while kept and error + abs(weights[kept]) <= tolerance:
+        error += abs(weights[kept])
+        kept -= 1
+    in_t = [sum(weights[k] * chebyshev[k][j] for k in range(j, kept + 1) if j < len(chebyshev[k]))
+            for j in range(kept + 1)]
+    # back to z: t = 2 z / z_max − 1
+    in_z = [sum(a * math.comb(k, j) * (2 / z_max) ** j * (-1) ** (k - j) for k, a in enumerate(in_t) if k >= j)
+            for j in range(kept + 1)]
+    return tuple(float(a) for a in in_z)
+
+
 @functools.cache
-def _taylor(dtype_name: str, limit: float = POLYNOMIAL_LIMIT) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Coefficients of cos θ = Σ (−1)^k θ^2k/(2k)! and sin θ / θ = Σ (−1)^k θ^2k/(2k+1)!, each
-    truncated before its first term below eps/4 (relative) at |θ| = ``limit``."""
-    eps = float(np.finfo(dtype_name).eps)
-
-    def terms(offset):
-        out, k = [], 0
-        while not out or limit ** (2 * k) / math.factorial(2 * k + offset) > eps / 4:
-            out.append((-1) ** k / math.factorial(2 * k + offset))
-            k += 1
-        return tuple(out)
-
-    return terms(0), terms(1)
+def _polynomials(dtype_name: str, limit: float = POLYNOMIAL_LIMIT) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Coefficients in θ² of cos θ and sin θ / θ for |θ| <= ``limit``, each the shortest whose
+    error there is below a quarter of the dtype's epsilon (``_economized``; the truncated Taylor
+    series needs one term more for each: ``benchmarks/kernel.py``)."""
+    tolerance = float(np.finfo(dtype_name).eps) / 4
+    return _economized(0, limit, tolerance), _economized(1, limit, tolerance)
 
 
 def _horner(coefficients, x):
@@ -116,7 +150,7 @@ def cos_sin(angle, kernel: str = "general", limit: float = POLYNOMIAL_LIMIT, sha
     """
     angle = jnp.asarray(angle)
     if kernel == "polynomial":
-        cos_c, sin_c = _taylor(np.dtype(angle.dtype).name, float(limit))
+        cos_c, sin_c = _polynomials(np.dtype(angle.dtype).name, float(limit))
         square = angle * angle
         return _horner(cos_c, square), angle * _horner(sin_c, square)
     pair = jnp.cos(angle), jnp.sin(angle)
@@ -419,7 +453,7 @@ def _angle_bound(rate, m, t):
     a value is traced)."""
     if any(isinstance(v, jax.core.Tracer) for v in (m, t, rate)):
         return None
-    norm = float(jnp.max(jnp.linalg.norm(m, axis=-1)))
+    norm = float(np.max(np.linalg.norm(np.asarray(m), axis=-1)))  # on the host: no device dispatch per flow
     return float(np.max(np.abs(np.asarray(rate)))) * norm * abs(float(t)) * (1 + 1e-6)
 
 
@@ -451,18 +485,19 @@ class AxisRotation(AbstractRotation):
         _check_axis(self.axis)
 
     def angle(self, state, t):
+        """θ = m_k · (rate · t): the scalar factor first, so a batch pays one product per state."""
         m = self._momentum(state)
-        return self.rate.astype(m.dtype) * _component(m, self.axis, self.components_first) * t
+        return _component(m, self.axis, self.components_first) * (self.rate.astype(m.dtype) * t)
 
     def __call__(self, state, t):
-        angle = self.angle(state, t)
-        c, s = half_cos_sin(angle, self.kernel, self.angle_limit, shared=_turns_several(self.parts))
+        half = self.angle(state, t / 2)  # θ/2 exactly (halving is exact): ``half_cos_sin`` without its product
+        c, s = cos_sin(half, self.kernel, self.angle_limit / 2, shared=_turns_several(self.parts))
         if self.parts is None:  # the free body: the bare two-component update (hot path)
             return _turn_axis(state, self.axis, c, s, self.components_first)
-        e = jnp.zeros(3, angle.dtype).at[self.axis].set(1)
+        e = jnp.zeros(3, half.dtype).at[self.axis].set(1)
         return _turn_state(state, self.parts,
                            lambda x, extra: _turn_axis(x, self.axis, _expand(c, extra), _expand(s, extra)),
-                           lambda: _half_angle_increment(e, angle, self.kernel, self.angle_limit))
+                           lambda: _half_angle_increment(e, half + half, self.kernel, self.angle_limit))
 
     def step_back(self, x_after, t, ct_after):
         """The inverse rotation and the pullback in one pass, sharing cos and sin: m_k is
@@ -476,7 +511,8 @@ class AxisRotation(AbstractRotation):
         m = self._momentum(x_after)
         m_k = _component(m, k, first)
         rate = self.rate.astype(m.dtype)
-        c, s = half_cos_sin(rate * m_k * t, self.kernel, self.angle_limit, shared=True)  # state and cotangent
+        half = self.angle(x_after, t / 2)  # the forward half angle, bit for bit
+        c, s = cos_sin(half, self.kernel, self.angle_limit / 2, shared=True)  # state and cotangent
 
         def back(v, extra):
             return _turn_axis(v, k, _expand(c, extra), -_expand(s, extra), first)
