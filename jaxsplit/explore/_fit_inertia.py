@@ -48,7 +48,7 @@ import numpy as np
 from ..core._errors import InputError
 from ..core._schemes import schemes
 from ..systems._rigid_body import RigidBody
-from ._fit import adam, lbfgs, predict, substeps
+from ._fit import minimise, predict, substeps
 
 
 # ------------------------------------------------------------------ data checks
@@ -182,9 +182,7 @@ def _optimise(params, obs, dts, log_i1, config):
         r = residuals(p)
         return jnp.mean(r * r)
 
-    params = adam(loss, params, adam_steps, adam_lr)
-    params, k = lbfgs(loss, params, lbfgs_iter, tol)
-    return params, k, loss(params)
+    return minimise(loss, params, adam_steps, adam_lr, lbfgs_iter, tol)
 
 
 @functools.partial(jax.jit, static_argnames=("config",))
