@@ -56,8 +56,8 @@ def main():
     start = time.perf_counter()
     out["cases"] = []
     lines = header(out, "Time to the first result (`benchmarks/compile_time.py`)") + [
-        "One state, h = 0.1, 10⁵ steps saved every 100; each case in a fresh process. First call = tracing, "
-        "lowering, compilation and the run; the durations from `jax.monitoring`.", "",
+        ("One state, h = 0.1, 10⁵ steps saved every 100; each case in a fresh process. First call = tracing, "
+         "lowering, compilation and the run; the durations from `jax.monitoring`."), "",
         "| scheme | split | sub-flows per step | first call | tracing | lowering | XLA compilation | run |",
         "|---|---|---|---|---|---|---|---|"]
     root = Path(__file__).resolve().parent.parent

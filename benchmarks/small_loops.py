@@ -128,9 +128,9 @@ def main():
     out = machine_info("python benchmarks/small_loops.py")
     out.update(settings={name: case_runs[0]["setting"] for name, case_runs in runs.items()}, cases={})
     lines = header(out, "Small loops as one kernel (`benchmarks/small_loops.py`)") + [
-        f"Median over {args.rounds} alternating rounds of the median of {args.calls} calls; each setting in its own "
-        f"process. Run time per setting, in brackets the speed-up over {base}; first call = compilation and one "
-        f"run; difference: largest |difference| from {base}'s results (0 = bit-identical).", "",
+        (f"Median over {args.rounds} alternating rounds of the median of {args.calls} calls; each setting in its own "
+         f"process. Run time per setting, in brackets the speed-up over {base}; first call = compilation and one "
+         f"run; difference: largest |difference| from {base}'s results (0 = bit-identical)."), "",
         "| case | " + " | ".join(f"run, {name}" for name in runs) + " | "
         + " | ".join(f"first call, {name}" for name in runs) + " | difference |",
         "|---|" + "---|" * (2 * len(runs) + 1)]

@@ -21,9 +21,9 @@ import diffrax
 import jax
 import jax.numpy as jnp
 import numpy as np
+from _common import finish, fmt, header, interleaved, log, machine_info, paired_ratio
 
 import jaxsplit
-from _common import finish, fmt, header, interleaved, log, machine_info, paired_ratio
 
 jax.config.update("jax_enable_x64", True)
 WIDE = {"xla_cpu_prefer_vector_width": 512}
@@ -69,9 +69,9 @@ def main():
     start = time.perf_counter()
     out["cases"] = {}
     lines = header(out, "512-bit vectors for jaxsplit's programs (`benchmarks/vector_width.py`)") + [
-        f"Both variants compiled in one process, calls interleaved over {rounds} rounds; run = median over rounds, "
-        "speed-up = median of the per-round ratios (256-bit / 512-bit); compile = first call (compilation and one "
-        "run); identical: the two results bit for bit.", "",
+        (f"Both variants compiled in one process, calls interleaved over {rounds} rounds; run = median over rounds, "
+         "speed-up = median of the per-round ratios (256-bit / 512-bit); compile = first call (compilation and one "
+         "run); identical: the two results bit for bit."), "",
         "| case | run, 256-bit (XLA default) | run, 512-bit | speed-up | compile 256 / 512 | identical |",
         "|---|---|---|---|---|---|"]
     for name, (fn, args) in cases().items():
@@ -81,7 +81,7 @@ def main():
             t0 = time.perf_counter()
             results[key] = jax.block_until_ready(f(*args))
             compile_s[key] = time.perf_counter() - t0
-        times = interleaved({key: (lambda f=f: jax.block_until_ready(f(*args))) for key, f in variants.items()}, rounds)
+        times = interleaved({key: (lambda f=f, args=args: jax.block_until_ready(f(*args))) for key, f in variants.items()}, rounds)
         same = all(np.array_equal(np.asarray(a), np.asarray(b)) for a, b in
                    zip(jax.tree_util.tree_leaves(results["256"]), jax.tree_util.tree_leaves(results["512"])))
         entry = {"run_s": {k: statistics.median(v) for k, v in times.items()}, "compile_s": compile_s,

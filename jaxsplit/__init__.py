@@ -24,9 +24,9 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 if typing.TYPE_CHECKING:
+    from . import systems as systems
     from ._xla_cpu import compiler_options as compiler_options
     from ._xla_cpu import small_loop_setting as small_loop_setting
-    from . import systems as systems
     from .checks._invariants import InvariantErrors as InvariantErrors
     from .checks._invariants import invariant_errors as invariant_errors
     from .checks._invariants import monitor_invariants as monitor_invariants
@@ -160,7 +160,7 @@ def __dir__():
 
 # Before JAX starts its backend: XLA compiles small loops (one body, a top, a few bodies) as one kernel
 # (``_xla_cpu``; a millisecond, no JAX import).
-from ._xla_cpu import small_loop_setting  # noqa: E402
+from ._xla_cpu import small_loop_setting
 
 small_loop_setting()
 
