@@ -176,13 +176,7 @@ def _optimise(params, obs, dts, log_i1, config):
     """Adam, then L-BFGS, on the mean squared misfit (one compilation per configuration
     and data shape: a new data set of the same shape reuses it)."""
     *_, adam_steps, adam_lr, lbfgs_iter, tol = config
-    residuals = _residual_fn(obs, dts, log_i1, config)
-
-    def loss(p):
-        r = residuals(p)
-        return jnp.mean(r * r)
-
-    return minimise(loss, params, adam_steps, adam_lr, lbfgs_iter, tol)
+    return minimise(_residual_fn(obs, dts, log_i1, config), params, adam_steps, adam_lr, lbfgs_iter, tol)
 
 
 @functools.partial(jax.jit, static_argnames=("config",))
