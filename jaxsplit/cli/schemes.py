@@ -28,11 +28,13 @@ def run(args):
     if args.json:
         _metadata.print_json({"schemes": [
             {"name": s.name, "order": s.order, "stages": s.stages, "form": s.form,
-             "symmetric": s.symmetric, "citation": s.citation, "coefficients": list(s.coefficients)}
+             "symmetric": s.symmetric, "citation": s.citation, "coefficients": list(s.coefficients),
+             "processor": list(s.processor)}
             for s in table]})
         return 0
     header = ("name", "order", "stages", "form", "citation")
-    rows = [header] + [(s.name, str(s.order), str(s.stages), s.form, s.citation) for s in table]
+    rows = [header] + [(s.name, str(s.order), str(s.stages), s.form + (" (processed)" if s.processed else ""), s.citation)
+                       for s in table]
     widths = [max(len(r[i]) for r in rows) for i in range(4)]
     for row in rows:
         print("  ".join(cell.ljust(w) for cell, w in zip(row[:4], widths)) + "  " + row[4])

@@ -53,6 +53,17 @@ def word(scheme: Scheme, n_pieces: int) -> Word:
     return tuple((p, w) for p, w in entries if w != 0.0)
 
 
+def processor_words(scheme: Scheme, n_pieces: int) -> tuple[Word, Word]:
+    """(P, P⁻¹) of a processed scheme as words, () for others: P the Strang steps of the
+    processor weights, P⁻¹ the same sub-flows reversed with negated weights (exact for group
+    flows, φ_{−t} = φ_t⁻¹)."""
+    if not scheme.processed:
+        return (), ()
+    pre = word(Scheme(scheme.name, 2, "symmetric", (1.0,)), n_pieces)  # Strang's word for h = 1
+    pre = tuple((p, w * g) for g in scheme.processor for p, w in pre if w * g != 0.0)
+    return pre, tuple((p, -w) for p, w in reversed(pre))
+
+
 def merge(w: Word, mergeable=None) -> Word:
     """Merge adjacent sub-flows of the same piece; ``mergeable[p]`` False keeps piece p's
     sub-flows apart (only exact one-parameter groups merge)."""
@@ -148,9 +159,15 @@ class Composition(AbstractFlow):
     scheme: Scheme | None = eqx.field(static=True, default=None)
     fsal: bool = eqx.field(static=True, default=False)
     structure_of_arrays: bool = eqx.field(static=True, default=False)
+    processing: tuple[Word, Word, Word] | None = eqx.field(static=True, default=None)  # (P, K, P⁻¹)
 
     def __call__(self, state, h):
         return self._in_layout(lambda x: _apply(self.flows, self.word, x, _like_state(h, x)), state)
+
+    @property
+    def kernel_word(self) -> Word:
+        """The sub-flows repeated by a run: the word, or a processed scheme's kernel K."""
+        return self.word if self.processing is None else self.processing[1]
 
     def _in_layout(self, run, state):
         if not self.structure_of_arrays:
@@ -165,11 +182,8 @@ class Composition(AbstractFlow):
         """The largest |weight| each piece is called with (sub-steps are weight·h), merges
         across steps included."""
         out = [0.0] * len(self.flows)
-        for piece, weight in self.word:
+        for piece, weight in self.word + sum(self._sequences(), ()):
             out[piece] = max(out[piece], abs(weight))
-        if self.fsal:
-            piece = self.word[0][0]
-            out[piece] = max(out[piece], abs(self.word[0][1] + self.word[-1][1]))
         return tuple(out)
 
     def for_run(self, x0, h, step=None) -> "Composition":
@@ -187,7 +201,7 @@ class Composition(AbstractFlow):
         if len(firsts) > 1:  # all or none: the layout is the composition's
             flows = tuple(dataclasses.replace(f, components_first=False) if f.components_first else f
                           for f in flows)
-        return Composition(flows, self.word, self.scheme, self.fsal, firsts == {True})
+        return Composition(flows, self.word, self.scheme, self.fsal, firsts == {True}, self.processing)
 
     @property
     def kernels(self) -> tuple[str, ...]:
@@ -213,11 +227,13 @@ class Composition(AbstractFlow):
         undone. Undoing it (φ_{−a}∘φ_{b+a} = φ_b: a group) instead of ending on the word's own
         tail keeps ONE copy of the word in the compiled program: XLA compiles every sub-flow
         as a kernel of its own, and a second copy doubled the compile time of long schemes
-        (Kahan–Li 10 on three pieces: 7 s). The cost: one rotation per call, and round-off."""
+        (Kahan–Li 10 on three pieces: 7 s). The cost: one rotation per call, and round-off.
+        A processed scheme's P opens the head and P⁻¹ closes the tail: n steps P⁻¹ ∘ K^n ∘ P."""
+        pre, kernel, post = self.processing or ((), self.word, ())
         if not self.fsal:
-            return (), self.word, ()
-        (piece, first), middle, (_, last) = self.word[0], self.word[1:-1], self.word[-1]
-        return ((piece, first),), middle + ((piece, last + first),), ((piece, -first),)
+            return pre, kernel, post
+        (piece, first), middle, (_, last) = kernel[0], kernel[1:-1], kernel[-1]
+        return merge(pre + ((piece, first),)), middle + ((piece, last + first),), merge(((piece, -first),) + post)
 
     def retrace(self, x_after, h, n, ct_after):
         """The reversible adjoint's backward pass over ``n`` steps: ``advance``'s exact
@@ -285,7 +301,7 @@ class Composition(AbstractFlow):
         static = isinstance(n, int)
         if static and n == 0:
             return state
-        if static and n == 1:  # the word itself: nothing to merge
+        if static and n == 1:  # the step itself: nothing to merge
             return _apply(self.flows, self.word, state, h)
         head, body, tail = self._sequences()
 
@@ -307,7 +323,7 @@ class Composition(AbstractFlow):
     @property
     def flows_per_step(self) -> int:
         """Sub-flows evaluated per step in a long run (after all merging)."""
-        return len(self.word) - (1 if self.fsal else 0)
+        return len(self.kernel_word) - (1 if self.fsal else 0)
 
 
 class RolledComposition(AbstractFlow):
@@ -417,8 +433,18 @@ def compose(flows: Sequence, scheme: "Scheme | str", params=None, *, merge_flows
                          "one-parameter group (φ_s∘φ_t = φ_(s+t) fails); leave merge_flows=None")
     if merge_flows not in (None, True, False):
         raise InputError(f"merge_flows must be None, True or False, got {merge_flows!r}")
+    if scheme.processed and not all(groups):
+        bad = [f"{k} ({type(f).__name__})" for k, f in enumerate(flows) if not f.is_group]
+        raise InputError(f"scheme {scheme.name!r} is processed (P⁻¹ ∘ K ∘ P), which needs every piece to be an "
+                         f"exact one-parameter group for P⁻¹; piece {', '.join(bad)} is not: use an unprocessed scheme")
     w = word(scheme, len(flows))
     if merge_flows is not False:
         w = merge(w, groups)
     fsal = merge_flows is not False and len(w) >= 2 and w[0][0] == w[-1][0] and groups[w[0][0]]
-    return Composition(flows, w, scheme, fsal)
+    if not scheme.processed:
+        return Composition(flows, w, scheme, fsal)
+    pre, post = processor_words(scheme, len(flows))
+    if merge_flows is not False:
+        pre, post = merge(pre, groups), merge(post, groups)
+    step = merge(pre + w + post, groups) if merge_flows is not False else pre + w + post
+    return Composition(flows, step, scheme, fsal, processing=(pre, w, post))

@@ -9,6 +9,12 @@ an alternating two-piece sequence (see ``_compose.word``):
 * ``partitioned`` — e^{a_1 hA} e^{b_1 hB} … e^{b_s hB} e^{a_{s+1} hA} for two pieces A, B,
   stored interleaved as (a_1, b_1, a_2, …, a_{s+1}); A acts first.
 
+A symmetric scheme may carry a *processor* (Blanes–Casas–Murua's processed methods): Strang
+weights π with P = S_{π_r h} ∘ … ∘ S_{π_1 h}, and the step is Ψ_h = P⁻¹ ∘ K_h ∘ P with K_h the
+composition of γ (the kernel). The processor telescopes over a run (Ψ_h^n = P⁻¹ ∘ K_h^n ∘ P),
+so n steps cost n kernels and one processor each way, and the kernel needs far fewer order
+conditions than a plain composition of the same order (``Composition.advance``).
+
 Coefficients are from ``shared/reference/coefficients.md`` (sources per table below); the
 order of every scheme is measured in the test suite, not trusted.
 """
@@ -57,6 +63,11 @@ class Scheme:
     form: str
     coefficients: tuple[float, ...]
     citation: str = ""
+    processor: tuple[float, ...] = ()  # Strang weights of P (first acts first); () = none
+
+    @property
+    def processed(self) -> bool:
+        return bool(self.processor)
 
     def __post_init__(self):
         if not re.fullmatch(r"[a-z0-9]+(-[a-z0-9]+)*", self.name or ""):
@@ -69,6 +80,11 @@ class Scheme:
         object.__setattr__(self, "coefficients", coefs)
         if not coefs or not all(math.isfinite(c) for c in coefs):
             raise InputError(f"{self.name}: coefficients must be finite numbers, got {coefs}")
+        processor = tuple(float(c) for c in self.processor)
+        object.__setattr__(self, "processor", processor)
+        if processor and (self.form != "symmetric" or not all(math.isfinite(c) for c in processor)):
+            raise InputError(f"{self.name}: a processor is finite Strang weights of a symmetric scheme, "
+                             f"got {processor} for a {self.form} one")
         tol = 8 * _EPS * sum(abs(c) for c in coefs)
         if self.form == "lie-adjoint" and len(coefs) % 2:
             raise InputError(f"{self.name}: a lie-adjoint scheme needs an even number of weights")
@@ -93,14 +109,18 @@ class Scheme:
 
     @property
     def stages(self) -> int:
-        """Strang steps (symmetric), Lie/adjoint half-steps (lie-adjoint) or B-flows (partitioned)."""
+        """Strang steps (symmetric; the kernel's, if processed), Lie/adjoint half-steps
+        (lie-adjoint) or B-flows (partitioned)."""
         return len(self.coefficients) // 2 if self.form == "partitioned" else len(self.coefficients)
 
     @property
     def symmetric(self) -> bool:
-        """Time-symmetric (Ψ_h⁻¹ = Ψ_{−h}): the composition word is a palindrome."""
+        """Time-symmetric (Ψ_h⁻¹ = Ψ_{−h}): the composition word is a palindrome (a processed
+        step P⁻¹ ∘ K_h ∘ P is not, in general: P depends on h)."""
         from ._compose import word
 
+        if self.processed:
+            return False
         w = word(self, n_pieces=2)
         return all(p == q and abs(a - b) <= 8 * _EPS for (p, a), (q, b) in zip(w, w[::-1]))
 
@@ -147,6 +167,20 @@ def _bm_partitioned(a_half, b_half):
         out += [ai] if bi is None else [ai, bi]
     return tuple(out)
 
+
+def _bcm_processed(kernel_half, processor_tail):
+    """Blanes–Casas–Murua publish 15 digits and the free weights only: the kernel's centre
+    restores Σγ = 1, the processor's first weight makes its first half sum to 0, and its second
+    half is the first negated (π_{r/2+k} = −π_k)."""
+    first = [-math.fsum(processor_tail)] + list(processor_tail)
+    half = [-g for g in first]  # the source lists −π
+    return (_mirror(kernel_half, 1.0 - 2.0 * math.fsum(kernel_half)), tuple(half + [-g for g in half]))
+
+
+_BCM8_KERNEL, _BCM8_PROCESSOR = _bcm_processed(
+    [0.168, 0.168, 0.585550530805562, -0.460090457516872, 0.172863148729731, 0.179664539695039],
+    [-0.008488123494574411, -0.337188967354338, 0.333987768164597, 0.588351189003849, 0.162324207599241,
+     -0.511744926116413, 0.236885952363384, 0.598212975943381, -0.543415765371656])
 
 _SQ19 = math.sqrt(19.0)
 
@@ -215,6 +249,10 @@ _TABLES = (
                     0.05194250296244964703718290, 0.05066509075992449633587434,
                     0.04967437063972987905456880], 0.04931773575959453791768001),
            "Sofroniou–Spaletta 2005, 35 stages (via OrdinaryDiffEq.jl SofSpa10)"),
+    Scheme("blanes-casas-murua-8", 8, "symmetric", _BCM8_KERNEL,
+           "Blanes–Casas–Murua 2006, processed: 13-stage kernel, 20-stage processor, effective order 8 "
+           "(via Blanes–Casas–Murua 2024, arXiv:2401.01722, Table 8.1); centres recomputed",
+           _BCM8_PROCESSOR),
     Scheme("mclachlan-m4", 4, "lie-adjoint",
            _mirror([(14 - _SQ19) / 108, (146 + 5 * _SQ19) / 540, (-23 - 20 * _SQ19) / 270,
                     (-2 + 10 * _SQ19) / 135, 1 / 5]),
