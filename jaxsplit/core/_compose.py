@@ -59,7 +59,7 @@ def processor_words(scheme: Scheme, n_pieces: int) -> tuple[Word, Word]:
     flows, φ_{−t} = φ_t⁻¹)."""
     if not scheme.processed:
         return (), ()
-    pre = word(Scheme(scheme.name, 2, "symmetric", (1.0,)), n_pieces)  # Strang's word for h = 1
+    pre = word(schemes["strang"], n_pieces)  # one Strang step of unit size
     pre = tuple((p, w * g) for g in scheme.processor for p, w in pre if w * g != 0.0)
     return pre, tuple((p, -w) for p, w in reversed(pre))
 
@@ -427,16 +427,15 @@ def compose(flows: Sequence, scheme: "Scheme | str", params=None, *, merge_flows
     if not flows:
         raise InputError("compose needs at least one flow")
     groups = [f.is_group for f in flows]
-    if merge_flows is True and not all(groups):
-        bad = [f"{k} ({type(f).__name__})" for k, f in enumerate(flows) if not f.is_group]
-        raise InputError(f"merge_flows=True merges every piece, but piece {', '.join(bad)} is not an exact "
+    bad = ", ".join(f"{k} ({type(f).__name__})" for k, f in enumerate(flows) if not f.is_group)
+    if merge_flows is True and bad:
+        raise InputError(f"merge_flows=True merges every piece, but piece {bad} is not an exact "
                          "one-parameter group (φ_s∘φ_t = φ_(s+t) fails); leave merge_flows=None")
     if merge_flows not in (None, True, False):
         raise InputError(f"merge_flows must be None, True or False, got {merge_flows!r}")
-    if scheme.processed and not all(groups):
-        bad = [f"{k} ({type(f).__name__})" for k, f in enumerate(flows) if not f.is_group]
+    if scheme.processed and bad:
         raise InputError(f"scheme {scheme.name!r} is processed (P⁻¹ ∘ K ∘ P), which needs every piece to be an "
-                         f"exact one-parameter group for P⁻¹; piece {', '.join(bad)} is not: use an unprocessed scheme")
+                         f"exact one-parameter group for P⁻¹; piece {bad} is not: use an unprocessed scheme")
     w = word(scheme, len(flows))
     if merge_flows is not False:
         w = merge(w, groups)
