@@ -19,7 +19,8 @@ import sys
 import time
 from pathlib import Path
 
-CASES = [(s, split) for s in ("strang", "kahan-li-6", "kahan-li-8", "triple-jump-8", "kahan-li-10", "sofroniou-spaletta-10")
+CASES = [(s, split) for s in ("strang", "kahan-li-6", "kahan-li-8", "mclachlan-ss15", "blanes-casas-murua-8", "triple-jump-8",
+                              "kahan-li-10", "sofroniou-spaletta-10")
          for split in ("axes", "casimir")]
 
 WORKER = """

@@ -87,6 +87,32 @@ def _apply(flows, w: Word, state, h):
     return state
 
 
+# Sub-flow sequences run once per call (a processor's P and P⁻¹) longer than this run as data
+# (``_apply_rolled``): unrolled, each sub-flow is a kernel of its own to compile, which for
+# Blanes–Casas–Murua 8 (P: 40 sub-flows each way, K: 27) was 2–3× the compile time of a plain
+# order-8 scheme, for work done once per call. Per-step sequences stay unrolled (no switch).
+ROLLED_ABOVE = 8
+
+
+def _apply_rolled(flows, w: Word, state, h):
+    """``_apply`` with the word as data: a ``lax.scan`` over its (piece, weight) pairs, each a
+    ``lax.switch`` over the flows; one compiled sub-flow per piece whatever the length."""
+    pieces = jnp.asarray(np.array([p for p, _ in w], dtype=np.int32))
+    weights = jnp.asarray(np.array([c for _, c in w]), dtype=h.dtype)
+    branches = [lambda x, t, f=f: f(x, t) for f in flows]
+
+    def sub_flow(x, piece_weight):
+        piece, weight = piece_weight
+        return jax.lax.switch(piece, branches, x, weight * h), None
+
+    return jax.lax.scan(sub_flow, state, (pieces, weights))[0]
+
+
+def _apply_once(flows, w: Word, state, h):
+    """A sequence run once per call: rolled when long (``ROLLED_ABOVE``), else as ``_apply``."""
+    return (_apply_rolled if len(w) > ROLLED_ABOVE else _apply)(flows, w, state, h)
+
+
 def _like_state(h, state):
     """The step size in the state's floating dtype (never the other way round)."""
     return jnp.asarray(h, dtype=float_dtype(state))
@@ -162,7 +188,16 @@ class Composition(AbstractFlow):
     processing: tuple[Word, Word, Word] | None = eqx.field(static=True, default=None)  # (P, K, P⁻¹)
 
     def __call__(self, state, h):
-        return self._in_layout(lambda x: _apply(self.flows, self.word, x, _like_state(h, x)), state)
+        return self._in_layout(lambda x: self._step(x, _like_state(h, x)), state)
+
+    def _step(self, state, h):
+        """One step: the word, or for a processed scheme P, K and P⁻¹ (the processor rolled,
+        ``_apply_once``; the map is the word's, unmerged at the two joints: equal to round-off)."""
+        if self.processing is None:
+            return _apply(self.flows, self.word, state, h)
+        pre, kernel, post = self.processing
+        state = _apply_once(self.flows, pre, state, h)
+        return _apply_once(self.flows, post, _apply(self.flows, kernel, state, h), h)
 
     @property
     def kernel_word(self) -> Word:
@@ -228,7 +263,8 @@ class Composition(AbstractFlow):
         tail keeps ONE copy of the word in the compiled program: XLA compiles every sub-flow
         as a kernel of its own, and a second copy doubled the compile time of long schemes
         (Kahan–Li 10 on three pieces: 7 s). The cost: one rotation per call, and round-off.
-        A processed scheme's P opens the head and P⁻¹ closes the tail: n steps P⁻¹ ∘ K^n ∘ P."""
+        A processed scheme's P opens the head and P⁻¹ closes the tail: n steps P⁻¹ ∘ K^n ∘ P
+        (head and tail run once per call, rolled where long: ``_apply_once``)."""
         pre, kernel, post = self.processing or ((), self.word, ())
         if not self.fsal:
             return pre, kernel, post
@@ -252,6 +288,25 @@ class Composition(AbstractFlow):
 
         pack, unpack = _joint_layout(x_after, ct_after)
 
+        def back_rolled(sub_flows):  # back() with the sequence as data, as _apply_rolled
+            pieces = jnp.asarray(np.array([p for p, _ in reversed(sub_flows)], dtype=np.int32))
+            weights = jnp.asarray(np.array([w for _, w in reversed(sub_flows)]), dtype=h.dtype)
+
+            def branch(piece):
+                def run(joint, acc, weight):
+                    x, ct = unpack(joint)
+                    x, ct, dp, dt = self.flows[piece].step_back(x, weight * h, ct)
+                    acc = acc[:piece] + (jax.tree_util.tree_map(jnp.add, acc[piece], (dp, weight * dt)),) + acc[piece + 1:]
+                    return pack(x, ct), acc
+                return run
+
+            branches = [branch(piece) for piece in range(len(self.flows))]
+
+            def sub_flow(carry, piece_weight):
+                return jax.lax.switch(piece_weight[0], branches, *carry, piece_weight[1]), None
+
+            return lambda carry: jax.lax.scan(sub_flow, carry, (pieces, weights))[0]
+
         def back(sub_flows):
             def run(carry):
                 joint, acc = carry
@@ -266,16 +321,21 @@ class Composition(AbstractFlow):
                 return joint, tuple(acc)
             return run
 
+        def back_once(sub_flows):  # as _apply_once
+            return (back_rolled if len(sub_flows) > ROLLED_ABOVE else back)(sub_flows)
+
         static = isinstance(n, int)
-        head, body, tail = ((), self.word, ()) if static and n == 1 else self._sequences()
+        head, body, tail = self._sequences()
+        if static and n == 1:  # the step itself, as _step runs it
+            head, body, tail = self.processing or ((), self.word, ())
 
         def walk(carry):
-            carry = back(tail)(carry)
+            carry = back_once(tail)(carry)
             if static:
                 carry = jax.lax.scan(lambda c, _: (back(body)(c), None), carry, length=n)[0]
             else:
                 carry = jax.lax.fori_loop(0, n, lambda _, c: back(body)(c), carry)
-            return back(head)(carry)
+            return back_once(head)(carry)
 
         carry = (pack(x_after, ct_after), zeros)
         if static:
@@ -302,19 +362,19 @@ class Composition(AbstractFlow):
         if static and n == 0:
             return state
         if static and n == 1:  # the step itself: nothing to merge
-            return _apply(self.flows, self.word, state, h)
+            return self._step(state, h)
         head, body, tail = self._sequences()
 
         def one(x):
             return _apply(self.flows, body, x, h)
 
         def steps(x):
-            x = _apply(self.flows, head, x, h)
+            x = _apply_once(self.flows, head, x, h)
             if static:
                 x = jax.lax.scan(lambda y, _: (_remat(one)(y), None), x, length=n)[0]
             else:
                 x = jax.lax.fori_loop(0, n, lambda _, y: one(y), x)
-            return _apply(self.flows, tail, x, h)
+            return _apply_once(self.flows, tail, x, h)
 
         if static or not head:
             return steps(state)
