@@ -18,17 +18,18 @@ import inspect
 import math
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..core._compose import compose, roll
+from ..core._compose import Composition, compose, roll
 from ..core._errors import InputError
 from ..core._integrate import integrate
 from ..core._schemes import schemes
 from ..core._state import as_state, float_dtype, ravel
 from ._base import AbstractSystem
 
-CANDIDATES = ("strang", "blanes-moan-s6-prk", "kahan-li-6", "kahan-li-8", "sofroniou-spaletta-10")
+CANDIDATES = ("strang", "blanes-moan-s6-prk", "kahan-li-6", "kahan-li-8", "blanes-casas-murua-8", "sofroniou-spaletta-10")
 # Time per rotation relative to the polynomial kernel truncated for |θ| <= 1 (benchmarks/results/kernel.md,
 # float64, one trajectory and a batch of 1e4 states laid out components-first): the general kernel, and
 # the polynomial one truncated for each smaller bound.
@@ -102,11 +103,11 @@ def auto_splitting(system: AbstractSystem, x0, *, tol: float, t_end: float, cand
     for split, options in resolved:
         flows = system.split(split, **options)
         steps = {name: compose(flows, name) for name in names if schemes.resolve(name).pieces_allowed(len(flows))}
-        length = max((len(step.word) for step in steps.values()), default=0)
+        length = max((len(step.kernel_word) for step in steps.values()), default=0)
         for name, step in steps.items():
             scheme = step.scheme
             # rolled to one length: every candidate of this split shares one compilation
-            hs, errors = _pilot_errors(roll(step, length), x0, pilot_time, counts, reference)
+            hs, errors = _pilot_errors(step, length, x0, pilot_time, counts, reference)
             rows.append(_candidate(step, scheme, split, options, hs, errors, pilot_time, tol, t_end, x0,
                                    (WINDOW[0] * eps * scale, WINDOW[1] * scale)))
     if not rows:
@@ -142,12 +143,18 @@ def _reference(system, x0, t, rate):
     return integrate(step, x0, t / n, n).final
 
 
-def _pilot_errors(step, x0, t, counts, reference):
+def _pilot_errors(step, length, x0, t, counts, reference):
     """(step sizes, max-norm errors at ``t``) for each step count: each run for its own count
-    (the output time ``t`` with h traced, so one compilation serves every count)."""
+    (the output time ``t`` with h traced, so one compilation serves every count), the step's
+    kernel rolled to ``length``. A processed scheme's run is P⁻¹ ∘ K^n ∘ P, as ``integrate``
+    runs it: P and P⁻¹ rolled on their own, once per count, not padded into every step."""
     exact = ravel(reference)[0]
     hs = t / np.asarray(counts, dtype=float)
-    errors = [float(jnp.max(jnp.abs(ravel(integrate(step, x0, float(h), ts=[t]).final)[0] - exact))) for h in hs]
+    pre, kernel, post = step.processing or ((), step.word, ())
+    run = roll(Composition(step.flows, kernel), length)
+    p, p_inv = (jax.jit(roll(Composition(step.flows, w))) if w else (lambda x, h: x) for w in (pre, post))
+    errors = [float(jnp.max(jnp.abs(ravel(p_inv(integrate(run, p(x0, h), float(h), ts=[t]).final, h))[0] - exact)))
+              for h in hs]
     return hs, np.asarray(errors)
 
 
@@ -174,7 +181,8 @@ def _candidate(step, scheme, split, options, hs, errors, pilot_time, tol, t_end,
         per_rotation = POLYNOMIAL_COST[layout][max(f.angle_limit for f in fast.flows)]
     else:
         per_rotation = GENERAL_COST[layout]
-    cost = n_steps * fast.flows_per_step * per_rotation
+    once = len(step.word) - len(step.kernel_word)  # a processor's P and P⁻¹, once per run
+    cost = (n_steps * fast.flows_per_step + max(once, 0)) * per_rotation
     return {"scheme": scheme.name, "split": split, "options": dict(options), "h": h, "n_steps": n_steps,
             "error_constant": constant, "predicted_error": constant * h**p * t_end, "kernel": fast.kernel,
             "cost": float(cost), "step": step}
