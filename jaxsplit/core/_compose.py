@@ -94,23 +94,29 @@ def _apply(flows, w: Word, state, h):
 ROLLED_ABOVE = 8
 
 
-def _apply_rolled(flows, w: Word, state, h):
+def _as_arrays(w: Word, dtype=None):
+    """A word as data: (pieces int32 (L,), weights (L,))."""
+    return (jnp.asarray(np.array([p for p, _ in w], dtype=np.int32)),
+            jnp.asarray(np.array([c for _, c in w], dtype=np.float64), dtype=dtype))
+
+
+def _apply_rolled(flows, pieces, weights, state, h):
     """``_apply`` with the word as data: a ``lax.scan`` over its (piece, weight) pairs, each a
     ``lax.switch`` over the flows; one compiled sub-flow per piece whatever the length."""
-    pieces = jnp.asarray(np.array([p for p, _ in w], dtype=np.int32))
-    weights = jnp.asarray(np.array([c for _, c in w]), dtype=h.dtype)
     branches = [lambda x, t, f=f: f(x, t) for f in flows]
 
     def sub_flow(x, piece_weight):
         piece, weight = piece_weight
-        return jax.lax.switch(piece, branches, x, weight * h), None
+        return jax.lax.switch(piece, branches, x, weight.astype(h.dtype) * h), None
 
     return jax.lax.scan(sub_flow, state, (pieces, weights))[0]
 
 
 def _apply_once(flows, w: Word, state, h):
     """A sequence run once per call: rolled when long (``ROLLED_ABOVE``), else as ``_apply``."""
-    return (_apply_rolled if len(w) > ROLLED_ABOVE else _apply)(flows, w, state, h)
+    if len(w) <= ROLLED_ABOVE:
+        return _apply(flows, w, state, h)
+    return _apply_rolled(flows, *_as_arrays(w, h.dtype), state, h)
 
 
 def _like_state(h, state):
@@ -289,8 +295,7 @@ class Composition(AbstractFlow):
         pack, unpack = _joint_layout(x_after, ct_after)
 
         def back_rolled(sub_flows):  # back() with the sequence as data, as _apply_rolled
-            pieces = jnp.asarray(np.array([p for p, _ in reversed(sub_flows)], dtype=np.int32))
-            weights = jnp.asarray(np.array([w for _, w in reversed(sub_flows)]), dtype=h.dtype)
+            pieces, weights = _as_arrays(sub_flows[::-1], h.dtype)
 
             def branch(piece):
                 def run(joint, acc, weight):
@@ -414,14 +419,7 @@ class RolledComposition(AbstractFlow):
     weights: jax.Array
 
     def __call__(self, state, h):
-        h = _like_state(h, state)
-        branches = [lambda x, t, f=f: f(x, t) for f in self.flows]
-
-        def sub_flow(x, piece_weight):
-            piece, weight = piece_weight
-            return jax.lax.switch(piece, branches, x, weight.astype(h.dtype) * h), None
-
-        return jax.lax.scan(sub_flow, state, (self.pieces, self.weights))[0]
+        return _apply_rolled(self.flows, self.pieces, self.weights, state, _like_state(h, state))
 
     @property
     def is_group(self) -> bool:
@@ -450,10 +448,7 @@ def roll(composition: Composition, length: int | None = None) -> RolledCompositi
     length = len(w) if length is None else int(length)
     if length < len(w):
         raise InputError(f"length must be at least the word length {len(w)}, got {length}")
-    padded = w + ((0, 0.0),) * (length - len(w))
-    pieces = jnp.asarray(np.array([p for p, _ in padded], dtype=np.int32))
-    weights = jnp.asarray(np.array([c for _, c in padded]))
-    return RolledComposition(composition.flows, pieces, weights)
+    return RolledComposition(composition.flows, *_as_arrays(w + ((0, 0.0),) * (length - len(w))))
 
 
 def compose(flows: Sequence, scheme: "Scheme | str", params=None, *, merge_flows: bool | None = None
