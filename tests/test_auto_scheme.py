@@ -54,9 +54,25 @@ def test_a_processed_candidate_is_piloted_as_integrate_runs_it():
 
     step = jaxsplit.splitting(BODY, "blanes-casas-murua-8", "casimir")
     counts = [20, 40]
-    _, errors = _auto._pilot_errors(step, len(step.kernel_word) + 5, M0, CASE.t_end, counts, REFERENCE)
+    _, errors = _auto._pilot_errors(step, M0, CASE.t_end, counts, REFERENCE)
     direct = [_error(jaxsplit.AutoSplitting(step, *[None] * 8), M0, CASE.t_end / n, n, REFERENCE) for n in counts]
     assert np.max(np.abs(errors - np.asarray(direct))) <= PILOT_ROUND_OFF, (errors, direct)
+
+
+def test_the_pilot_ladder_stops_in_the_round_off_floor():
+    """The ladder stops after its first error below ``stop``: the same errors up to there, the
+    dearer rest (round-off only) not run."""
+    from jaxsplit.systems import _auto
+
+    step = jaxsplit.splitting(BODY, "kahan-li-8", "casimir")
+    counts = [10, 14, 20, 28, 40, 56, 80]
+    hs, full = _auto._pilot_errors(step, M0, CASE.t_end, counts, REFERENCE)
+    stop = 1e-10
+    assert np.sum(full < stop) >= 2  # the ladder reaches the floor before its end
+    hs_stopped, stopped = _auto._pilot_errors(step, M0, CASE.t_end, counts, REFERENCE, stop)
+    k = len(stopped)
+    assert np.array_equal(stopped, full[:k]) and np.array_equal(hs_stopped, hs[:k])
+    assert stopped[-1] < stop <= np.min(stopped[:-1]) and k < len(counts)
 
 
 def test_round_off_at_the_smallest_pilot_steps_is_not_read_as_truncation_error():
