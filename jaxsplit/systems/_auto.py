@@ -6,7 +6,8 @@ bound allows the step size (cheaper the smaller the bound: ``POLYNOMIAL_COST``),
 one, ``GENERAL_COST`` times dearer, beyond. Error model: for each
 candidate (scheme, split) a pilot run over a short horizon T_p measures the global error
 e(h) against a tight reference at a ladder of step sizes (each step size run for its own
-count, h traced: one compilation per split); in the asymptotic window the error constant
+count, h traced: one compilation per split and word length, rolled; the ladder stops at the
+round-off floor); in the asymptotic window the error constant
 C = max e(h) / (h^p T_p) (p the scheme's order) and the global error is modelled as growing
 linearly in time (a phase error, as splittings of integrable motions show), e(h, T) ≈ C h^p T.
 The step for ``tol`` at ``t_end`` is h = (tol / (C t_end))^(1/p), never beyond the pilot's
@@ -100,14 +101,13 @@ def auto_splitting(system: AbstractSystem, x0, *, tol: float, t_end: float, cand
     counts = sorted({max(1, math.ceil(pilot_time * rate / a)) for a in PILOT_ANGLES})
     reference = _reference(system, x0, pilot_time, rate)
     rows = []
+    window = (WINDOW[0] * eps * scale, WINDOW[1] * scale)
     for split, options in resolved:
         flows = system.split(split, **options)
         steps = {name: compose(flows, name) for name in names if schemes.resolve(name).pieces_allowed(len(flows))}
         for name, step in steps.items():
-            scheme = step.scheme
-            hs, errors = _pilot_errors(step, x0, pilot_time, counts, reference, FLOOR_MARGIN * WINDOW[0] * eps * scale)
-            rows.append(_candidate(step, scheme, split, options, hs, errors, pilot_time, tol, t_end, x0,
-                                   (WINDOW[0] * eps * scale, WINDOW[1] * scale)))
+            hs, errors = _pilot_errors(step, x0, pilot_time, counts, reference, stop=FLOOR_MARGIN * window[0])
+            rows.append(_candidate(step, step.scheme, split, options, hs, errors, pilot_time, tol, t_end, x0, window))
     if not rows:
         raise InputError(f"no candidate scheme applies to the splits {offered} of {system.name}")
     best = min(rows, key=lambda r: r["cost"])
@@ -158,8 +158,8 @@ def _pilot_errors(step, x0, t, counts, reference, stop=0.0):
     p, p_inv = (jax.jit(roll(Composition(step.flows, w))) if w else (lambda x, h: x) for w in (pre, post))
     errors = []
     for h in hs:
-        errors.append(float(jnp.max(jnp.abs(ravel(p_inv(integrate(run, p(x0, h), float(h), ts=[t]).final, h))[0]
-                                            - exact))))
+        x = p_inv(integrate(run, p(x0, h), float(h), ts=[t]).final, h)
+        errors.append(float(jnp.max(jnp.abs(ravel(x)[0] - exact))))
         if errors[-1] < stop:
             break
     return hs[:len(errors)], np.asarray(errors)
@@ -188,8 +188,8 @@ def _candidate(step, scheme, split, options, hs, errors, pilot_time, tol, t_end,
         per_rotation = POLYNOMIAL_COST[layout][max(f.angle_limit for f in fast.flows)]
     else:
         per_rotation = GENERAL_COST[layout]
-    once = len(step.word) - len(step.kernel_word)  # a processor's P and P⁻¹, once per run
-    cost = (n_steps * fast.flows_per_step + max(once, 0)) * per_rotation
+    once = len(step.word) - len(step.kernel_word)  # a processor's P and P⁻¹, once per run (else 0)
+    cost = (n_steps * fast.flows_per_step + once) * per_rotation
     return {"scheme": scheme.name, "split": split, "options": dict(options), "h": h, "n_steps": n_steps,
             "error_constant": constant, "predicted_error": constant * h**p * t_end, "kernel": fast.kernel,
             "cost": float(cost), "step": step}
