@@ -197,18 +197,21 @@ class Composition(AbstractFlow):
         return self._in_layout(lambda x: self._step(x, _like_state(h, x)), state)
 
     def _step(self, state, h):
-        """One step: the word, or for a processed scheme P, K and P⁻¹ (the processor rolled,
+        """One step: P, K and P⁻¹ (``_parts``; a processed scheme's processor rolled,
         ``_apply_once``; the map is the word's, unmerged at the two joints: equal to round-off)."""
-        if self.processing is None:
-            return _apply(self.flows, self.word, state, h)
-        pre, kernel, post = self.processing
+        pre, kernel, post = self._parts
         state = _apply_once(self.flows, pre, state, h)
         return _apply_once(self.flows, post, _apply(self.flows, kernel, state, h), h)
 
     @property
+    def _parts(self) -> tuple[Word, Word, Word]:
+        """(P, K, P⁻¹): a processed scheme's processing, else ((), word, ())."""
+        return self.processing or ((), self.word, ())
+
+    @property
     def kernel_word(self) -> Word:
         """The sub-flows repeated by a run: the word, or a processed scheme's kernel K."""
-        return self.word if self.processing is None else self.processing[1]
+        return self._parts[1]
 
     def _in_layout(self, run, state):
         if not self.structure_of_arrays:
@@ -271,7 +274,7 @@ class Composition(AbstractFlow):
         (Kahan–Li 10 on three pieces: 7 s). The cost: one rotation per call, and round-off.
         A processed scheme's P opens the head and P⁻¹ closes the tail: n steps P⁻¹ ∘ K^n ∘ P
         (head and tail run once per call, rolled where long: ``_apply_once``)."""
-        pre, kernel, post = self.processing or ((), self.word, ())
+        pre, kernel, post = self._parts
         if not self.fsal:
             return pre, kernel, post
         (piece, first), middle, (_, last) = kernel[0], kernel[1:-1], kernel[-1]
@@ -294,18 +297,16 @@ class Composition(AbstractFlow):
 
         pack, unpack = _joint_layout(x_after, ct_after)
 
+        def back_one(piece, weight, joint, acc):  # one sub-flow undone, its cotangents added
+            x, ct = unpack(joint)
+            x, ct, dp, dt = self.flows[piece].step_back(x, weight * h, ct)
+            grown = jax.tree_util.tree_map(jnp.add, acc[piece], (dp, weight * dt))
+            return pack(x, ct), acc[:piece] + (grown,) + acc[piece + 1:]
+
         def back_rolled(sub_flows):  # back() with the sequence as data, as _apply_rolled
             pieces, weights = _as_arrays(sub_flows[::-1], h.dtype)
-
-            def branch(piece):
-                def run(joint, acc, weight):
-                    x, ct = unpack(joint)
-                    x, ct, dp, dt = self.flows[piece].step_back(x, weight * h, ct)
-                    acc = acc[:piece] + (jax.tree_util.tree_map(jnp.add, acc[piece], (dp, weight * dt)),) + acc[piece + 1:]
-                    return pack(x, ct), acc
-                return run
-
-            branches = [branch(piece) for piece in range(len(self.flows))]
+            branches = [lambda joint, acc, w, piece=piece: back_one(piece, w, joint, acc)
+                        for piece in range(len(self.flows))]
 
             def sub_flow(carry, piece_weight):
                 return jax.lax.switch(piece_weight[0], branches, *carry, piece_weight[1]), None
@@ -314,16 +315,11 @@ class Composition(AbstractFlow):
 
         def back(sub_flows):
             def run(carry):
-                joint, acc = carry
-                acc = list(acc)
                 for piece, weight in reversed(sub_flows):
-                    x, ct = unpack(joint)
-                    x, ct, dp, dt = self.flows[piece].step_back(x, weight * h, ct)
-                    acc[piece] = jax.tree_util.tree_map(jnp.add, acc[piece], (dp, weight * dt))
                     # as in _apply: keeps XLA from fusing (and recomputing) a whole word; without it a
                     # Sofroniou–Spaletta 10 gradient (Casimir split) did not finish in 5 minutes
-                    joint, acc = jax.lax.optimization_barrier((pack(x, ct), acc))
-                return joint, tuple(acc)
+                    carry = jax.lax.optimization_barrier(back_one(piece, weight, *carry))
+                return carry
             return run
 
         def back_once(sub_flows):  # as _apply_once
@@ -332,7 +328,7 @@ class Composition(AbstractFlow):
         static = isinstance(n, int)
         head, body, tail = self._sequences()
         if static and n == 1:  # the step itself, as _step runs it
-            head, body, tail = self.processing or ((), self.word, ())
+            head, body, tail = self._parts
 
         def walk(carry):
             carry = back_once(tail)(carry)
