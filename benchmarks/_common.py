@@ -78,6 +78,26 @@ def fmt(seconds: float) -> str:
     return f"{seconds * 1e6:.3g} µs"
 
 
+def device_name() -> str:
+    """``cpu``, or the accelerator's platform and model (``gpu (NVIDIA H100 80GB HBM3)``)."""
+    device = jax.devices()[0]
+    return device.platform if device.platform == "cpu" else f"{device.platform} ({device.device_kind})"
+
+
+def cpu_name() -> str:
+    """The processor as Linux names it, with its family and model and whether it has AVX-512
+    (``AMD EPYC (family 25, model 17), AVX-512``): ratios against peers moved by 1.5-1.9× between
+    hosts (``README.md``, work-precision runs), so every record says which one it ran on."""
+    try:
+        fields = dict(line.split(":", 1) for line in Path("/proc/cpuinfo").read_text().splitlines()[:30]
+                      if ":" in line)
+    except OSError:
+        return platform.processor() or "unknown processor"
+    fields = {k.strip(): v.strip() for k, v in fields.items()}
+    avx512 = ", AVX-512" if "avx512f" in fields.get("flags", "").split() else ""
+    return f"{fields.get('model name', '?')} (family {fields.get('cpu family', '?')}, model {fields.get('model', '?')}){avx512}"
+
+
 def machine_info(command: str) -> dict:
     root = Path(__file__).resolve().parent.parent
     try:
@@ -90,7 +110,7 @@ def machine_info(command: str) -> dict:
     return {
         "command": command,
         "date_utc": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
-        "machine": f"{platform.machine()}, {os.cpu_count()} CPUs (shared with other jobs), {jax.devices()[0].platform}",
+        "machine": f"{platform.machine()}, {os.cpu_count()} CPUs ({cpu_name()}; shared with other jobs), {device_name()}",
         "git": head + (" + uncommitted library changes" if dirty else ""),
         "load_average_at_start": [round(v, 2) for v in os.getloadavg()],
         "xla_small_loops": jaxsplit.small_loop_setting(),
@@ -113,10 +133,16 @@ def finish(stem: str, out: dict, lines: list[str], start: float, quick: bool = F
     write(stem, quick, out, lines + ["", f"Total wall time {out['wall_s']:.0f} s."])
 
 
-def write(stem: str, quick: bool, out: dict, lines: list[str]):
-    """``results/<stem>{-quick}.{json,md}``; the table is printed too."""
+def result_path(stem: str, suffix: str, quick: bool = False) -> Path:
+    """``results/<stem>[-quick][-<backend>].<suffix>``: a quick run or one on an accelerator
+    (``-gpu``) never overwrites the full CPU record."""
     RESULTS.mkdir(exist_ok=True)
-    stem = stem + ("-quick" if quick else "")
-    (RESULTS / f"{stem}.json").write_text(json.dumps(out, indent=1, default=float))
-    (RESULTS / f"{stem}.md").write_text("\n".join(lines) + "\n")
+    backend = jax.default_backend()
+    return RESULTS / f"{stem}{'-quick' if quick else ''}{'' if backend == 'cpu' else '-' + backend}.{suffix}"
+
+
+def write(stem: str, quick: bool, out: dict, lines: list[str]):
+    """``result_path(stem, 'json' and 'md', quick)``; the table is printed too."""
+    result_path(stem, "json", quick).write_text(json.dumps(out, indent=1, default=float))
+    result_path(stem, "md", quick).write_text("\n".join(lines) + "\n")
     print("\n".join(lines))

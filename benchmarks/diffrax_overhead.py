@@ -26,11 +26,9 @@ Writes ``benchmarks/results/diffrax_overhead{,-quick}.{json,md}``.
 """
 
 import argparse
-import json
 import statistics
 import sys
 import time
-from pathlib import Path
 
 import jax
 
@@ -38,12 +36,11 @@ jax.config.update("jax_enable_x64", True)
 
 import diffrax
 import jax.numpy as jnp
-from _common import aot, fmt, interleaved, machine_info, paired_ratio, ready
+from _common import aot, fmt, interleaved, machine_info, paired_ratio, ready, write
 
 import jaxsplit
 import jaxsplit.diffrax as jd
 
-RESULTS = Path(__file__).resolve().parent / "results"
 CASE = jaxsplit.STANDARD_CASE
 INERTIA = jnp.asarray(CASE.inertia)
 M0 = jnp.asarray(CASE.m0)
@@ -229,11 +226,7 @@ def main(argv=None):
               "| output | time |", "|---|---|",
               f"| final state | {fmt(c['final state'])} |", f"| 50 output times | {fmt(c['50 output times'])} |",
               f"| ratio | **{c['ratio']:.1f}** |"]
-    stem = "diffrax_overhead" + ("-quick" if args.quick else "")
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / f"{stem}.json").write_text(json.dumps(out, indent=1))
-    (RESULTS / f"{stem}.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    write("diffrax_overhead", args.quick, out, lines)
 
 
 if __name__ == "__main__":

@@ -25,10 +25,8 @@ Writes ``benchmarks/results/exact_solution{,-quick}.{json,md}``.
 """
 
 import argparse
-import json
 import sys
 import time
-from pathlib import Path
 
 import jax
 
@@ -36,11 +34,10 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp
 import numpy as np
-from _common import aot, fmt, interleaved, machine_info, paired_ratio, ready
+from _common import aot, fmt, interleaved, machine_info, paired_ratio, ready, write
 
 import jaxsplit
 
-RESULTS = Path(__file__).resolve().parent / "results"
 CASE = jaxsplit.STANDARD_CASE
 INERTIA = jnp.asarray(CASE.inertia, dtype=jnp.float64)
 M0 = jnp.asarray(CASE.m0, dtype=jnp.float64)
@@ -202,11 +199,7 @@ def main(argv=None):
     out["wall_s"] = time.perf_counter() - start
     lines.append(f"Total wall time of the script: {out['wall_s']:.0f} s.")
 
-    RESULTS.mkdir(exist_ok=True)
-    stem = "exact_solution-quick" if args.quick else "exact_solution"
-    (RESULTS / f"{stem}.json").write_text(json.dumps(out, indent=1))
-    (RESULTS / f"{stem}.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    write("exact_solution", args.quick, out, lines)
     return out
 
 

@@ -27,7 +27,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
-from _common import RESULTS, finish, header, interleaved, log, machine_info, scheme_label
+from _common import finish, header, interleaved, log, machine_info, result_path, scheme_label
 
 import jaxsplit
 
@@ -104,8 +104,7 @@ def main(argv=None):
         ax.grid(True, which="both", alpha=0.3)
     axes[1].legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0))
     fig.suptitle(f"Standard rigid body over T = {t_end:g}: splittings and Runge–Kutta methods (same wall time, or same step)")
-    RESULTS.mkdir(exist_ok=True)
-    fig.savefig(RESULTS / f"long_horizon{'-quick' if quick else ''}.png", dpi=110)
+    fig.savefig(result_path("long_horizon", "png", quick), dpi=110)
     out["rows"] = rows
     lines = header(out, f"Long horizon, T = {t_end:g} (`benchmarks/long_horizon.py`)")
     lines += [("Each Runge–Kutta method runs with the wall time of the splitting it faces (fixed step calibrated, "

@@ -32,7 +32,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
-from _common import RESULTS, finish, header, interleaved, log, machine_info, scheme_label, time_to_reach
+from _common import finish, header, interleaved, log, machine_info, result_path, scheme_label, time_to_reach
 from scipy.integrate import solve_ivp
 
 import jaxsplit
@@ -212,8 +212,7 @@ def main(argv=None):
     for a in auto:
         lines.append(f"| {a['body']} | {a['tol']:.0e} | {scheme_label(a['scheme'])}, {a['split']} split | {a['n_steps']} | "
                      f"{a['error']:.2e} | {a['time_s'] * 1e3:.3g} ms | {a['pilot_s']:.2g} s |")
-    RESULTS.mkdir(exist_ok=True)
-    plot(rows, RESULTS / f"work_precision{'-quick' if quick else ''}.png")
+    plot(rows, result_path("work_precision", "png", quick))
     finish("work_precision", out, lines, start, quick)
 
 

@@ -64,6 +64,16 @@ def test_the_run_picks_the_kernel_from_the_casimir_bound():
     assert jaxsplit.compose(STANDARD.split("casimir") + (kick,), "strang").for_run(M0, 0.1).kernel == "general"
 
 
+
+def test_the_bound_is_reduced_where_the_batch_lives():
+    """The run's max|m| by NumPy on the CPU and by one device reduction on an accelerator: the
+    same value (to round-off) on any batch, so both choose the same kernel and truncation."""
+    batch = np.random.default_rng(3).standard_normal((4, 5, 3)) * np.array([1.0, 3.0, 0.5])
+    host = so3._largest_norm(jnp.asarray(batch))
+    device = float(so3._device_largest_norm(jnp.asarray(batch)))
+    assert host == pytest.approx(np.max(np.linalg.norm(batch, axis=-1)), rel=ROUNDOFF)
+    assert device == pytest.approx(host, rel=ROUNDOFF)
+    assert so3._largest_norm(batch) == host  # a NumPy batch: read in place
 def test_the_polynomial_path_has_no_sine_or_cosine():
     step = jaxsplit.splitting(STANDARD, "strang", "casimir")
 
