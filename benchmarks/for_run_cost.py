@@ -17,7 +17,6 @@ copied to the host and reduced there, once per flow) against a 7.4 ms run; after
 """
 
 import statistics
-import time
 
 import jax
 
@@ -25,7 +24,7 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp
 import numpy as np
-from _common import header, machine_info, write
+from _common import header, interleaved, machine_info, write
 
 import jaxsplit
 
@@ -34,13 +33,8 @@ BATCHES = (10_000, 100_000, 1_000_000, 10_000_000)
 
 
 def median_time(fn, rounds: int = 5) -> float:
-    fn()
-    times = []
-    for _ in range(rounds):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+    fn()  # compiled and warm
+    return statistics.median(interleaved({"fn": fn}, rounds)["fn"])
 
 
 def measure(step, b: int) -> dict:

@@ -36,7 +36,7 @@ class _Whole(tuple):
 
 
 def _whole(w):
-    return w if w is None or isinstance(w, _Whole) else _Whole(w)
+    return w if isinstance(w, _Whole) else _Whole(w)
 
 
 def _whole_parts(processing):

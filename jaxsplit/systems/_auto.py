@@ -153,7 +153,7 @@ def _pilot_errors(step, x0, t, counts, reference, stop=0.0):
     the first third of the ladder; ``_candidate`` leaves such points out of the model)."""
     exact = ravel(reference)[0]
     hs = t / np.asarray(counts, dtype=float)
-    pre, kernel, post = step.processing or ((), step.word, ())
+    pre, kernel, post = step._parts
     run = roll(Composition(step.flows, kernel), 1 << (len(kernel) - 1).bit_length())
     p, p_inv = (jax.jit(roll(Composition(step.flows, w))) if w else (lambda x, h: x) for w in (pre, post))
     errors = []
