@@ -119,6 +119,51 @@ def test_a_batch_runs_components_first_and_matches_single_states():
     np.testing.assert_allclose(fast(states, 0.05), step(states, 0.05), atol=ROUNDOFF)
 
 
+@pytest.mark.parametrize("scheme, h, last", [("strang", 0.05, False),           # two rotations: first
+                                              ("kahan-li-8", 0.5, True),          # angles <= 1/4: last
+                                              ("kahan-li-8", 1.0, False)])        # larger angles: first
+def test_a_batch_layout_follows_the_step_and_both_layouts_agree_bit_for_bit(monkeypatch, scheme, h, last):
+    """``for_run`` lays a batch out components last (the select form) only for steps of more
+    than two rotations whose angles are bounded by 1/4; either layout gives the same bits."""
+    states = jax.random.normal(jax.random.PRNGKey(4), (7, 3))
+    states = states / jnp.linalg.norm(states, axis=1, keepdims=True)
+    step = jaxsplit.splitting(STANDARD, scheme, "casimir")
+    assert step.for_run(states, h).structure_of_arrays != last
+    assert not step.for_run(states[0], h).structure_of_arrays  # one state: components last, always
+    runs = {}
+    for layout, limits in {"first": (10**9, 0.0), "last": (0, math.inf)}.items():
+        monkeypatch.setattr(so3, "COMPONENTS_FIRST_UP_TO", limits[0])
+        monkeypatch.setattr(so3, "COMPONENTS_LAST_UP_TO", limits[1])
+        assert step.for_run(states, h).structure_of_arrays == (layout == "first")
+        runs[layout] = np.asarray(jaxsplit.integrate(step, states, h, 30, save_every=10).x)
+    np.testing.assert_array_equal(runs["first"], runs["last"])
+
+
+def test_the_select_form_is_traced_only_inside_jaxsplits_loops():
+    """Rotations use the select form only in the body of ``_loops.threaded`` (whose state XLA
+    cannot hoist anything from); elsewhere (a user's own loop, a differentiated run) the stack."""
+    from jaxsplit.core import _loops
+
+    seen = []
+    assert not _loops.selects()
+    _loops.threaded(lambda x, inv: seen.append(_loops.selects()) or x * inv, jnp.ones(3), jnp.asarray(2.0), 3)
+    _loops.threaded(lambda x, inv: seen.append(_loops.selects()) or x * inv, jnp.ones(3), jnp.asarray(2.0),
+                    jnp.asarray(3))
+    assert seen and all(seen) and not _loops.selects()
+    # the value and the derivatives are those of the plain loop (reverse mode saves no invariant per step)
+    body = lambda x, inv: x * inv[0] + inv[1]
+    plain = lambda x, a, b: jax.lax.fori_loop(0, 5, lambda _, y: body(y, (a, b)), x)
+    looped = lambda x, a, b: _loops.repeated(body, x, (a, b), 5)
+    args = (jnp.asarray([1.0, 2.0]), jnp.asarray(0.9), jnp.asarray(0.1))
+    np.testing.assert_allclose(looped(*args), plain(*args), rtol=ROUNDOFF)
+    for k in range(3):
+        np.testing.assert_allclose(jax.grad(lambda *a: jnp.sum(looped(*a)), argnums=k)(*args),
+                                   jax.grad(lambda *a: jnp.sum(plain(*a)), argnums=k)(*args), rtol=ROUNDOFF)
+    tangent = jax.jvp(looped, args, (jnp.ones(2), jnp.asarray(1.0), jnp.asarray(0.0)))[1]
+    np.testing.assert_allclose(tangent, jax.jvp(plain, args, (jnp.ones(2), jnp.asarray(1.0), jnp.asarray(0.0)))[1],
+                               rtol=ROUNDOFF)
+
+
 def test_a_bad_kernel_name_or_limit_is_refused():
     with pytest.raises(jaxsplit.InputError, match="kernel must be one of"):
         jaxsplit.AxisRotation(0, 1.0, kernel="fast")

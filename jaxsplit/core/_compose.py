@@ -19,6 +19,7 @@ import numpy as np
 
 from ._errors import InputError
 from ._flows import AbstractFlow, as_flow, split_parameters, sum_to_shape
+from ._loops import repeated, threaded
 from ._schemes import Scheme, schemes
 from ._state import float_dtype
 
@@ -316,9 +317,9 @@ class Composition(AbstractFlow):
 
         pack, unpack = _joint_layout(x_after, ct_after)
 
-        def back_one(piece, weight, joint, acc):  # one sub-flow undone, its cotangents added
+        def back_one(piece, weight, joint, acc, flows=self.flows, h=h):  # one sub-flow undone, cotangents added
             x, ct = unpack(joint)
-            x, ct, dp, dt = self.flows[piece].step_back(x, weight * h, ct)
+            x, ct, dp, dt = flows[piece].step_back(x, weight * h, ct)
             grown = jax.tree_util.tree_map(jnp.add, acc[piece], (dp, weight * dt))
             return pack(x, ct), acc[:piece] + (grown,) + acc[piece + 1:]
 
@@ -332,12 +333,12 @@ class Composition(AbstractFlow):
 
             return lambda carry: jax.lax.scan(sub_flow, carry, (pieces, weights))[0]
 
-        def back(sub_flows):
+        def back(sub_flows, flows_h=(self.flows, h)):
             def run(carry):
                 for piece, weight in reversed(sub_flows):
                     # as in _apply: keeps XLA from fusing (and recomputing) a whole word; without it a
                     # Sofroniou–Spaletta 10 gradient (Casimir split) did not finish in 5 minutes
-                    carry = jax.lax.optimization_barrier(back_one(piece, weight, *carry))
+                    carry = jax.lax.optimization_barrier(back_one(piece, weight, *carry, *flows_h))
                 return carry
             return run
 
@@ -351,10 +352,7 @@ class Composition(AbstractFlow):
 
         def walk(carry):
             carry = back_once(tail)(carry)
-            if static:
-                carry = jax.lax.scan(lambda c, _: (back(body)(c), None), carry, length=n)[0]
-            else:
-                carry = jax.lax.fori_loop(0, n, lambda _, c: back(body)(c), carry)
+            carry = threaded(lambda c, flows_h: back(body, flows_h)(c), carry, (self.flows, h), n)
             return back_once(head)(carry)
 
         carry = (pack(x_after, ct_after), zeros)
@@ -385,15 +383,13 @@ class Composition(AbstractFlow):
             return self._step(state, h)
         head, body, tail = self._sequences()
 
-        def one(x):
-            return _apply(self.flows, body, x, h)
+        def one(x, flows_h):
+            flows, step = flows_h
+            return _apply(flows, body, x, step)
 
         def steps(x):
             x = _apply_once(self.flows, head, x, h)
-            if static:
-                x = jax.lax.scan(lambda y, _: (_remat(one)(y), None), x, length=n)[0]
-            else:
-                x = jax.lax.fori_loop(0, n, lambda _, y: one(y), x)
+            x = repeated(one, x, (self.flows, h), n, _remat) if static else threaded(one, x, (self.flows, h), n)
             return _apply_once(self.flows, tail, x, h)
 
         if static or not head:

@@ -39,9 +39,11 @@ bound, the fewer the terms (float64: 8 for L = 1/16, 16 for L = 1), so L is the 
 angle (``half_cos_sin``), so its polynomial is truncated for L/2. The map is the same exact
 rotation; only its trigonometry is evaluated differently. ``for_run`` selects the kernel
 once per run from the initial state (``Composition.for_run``, called by ``integrate``); the
-``"general"`` kernel is used otherwise. For a batch of free-body states a run also moves the
-components first (structure of arrays: each component contiguous over the batch,
-``components_first``).
+``"general"`` kernel is used otherwise. For a batch of free-body states a run also picks the
+layout (``COMPONENTS_FIRST_UP_TO``): components first (structure of arrays: each component
+contiguous over the batch, ``components_first``), or components last with each rotation a
+select on the component index that evaluates the polynomial once per state
+(``_with_components``).
 """
 
 import dataclasses
@@ -56,6 +58,7 @@ import numpy as np
 
 from ..core._errors import InputError
 from ..core._flows import AbstractFlow
+from ..core._loops import selects
 from ..core._state import fits_batch
 
 PARTS = ("momentum", "vector", "attitude", "quaternion", "fixed")
@@ -229,6 +232,27 @@ def _component(x, k: int, first: bool = False):
     return x[k] if first else x[..., k]
 
 
+def _with_components(x, new: dict, first: bool = False):
+    """``x`` with the components ``new`` = {k: values} replaced (on its first axis if ``first``,
+    else on its last).
+
+    Why two forms: XLA compiles a ``stack`` (a concatenate) as one loop per piece, so what the
+    new components share (a rotation's cos and sin) is evaluated once per piece. On the last
+    axis a ``select`` on the component index keeps a state's components in one loop iteration,
+    where LLVM evaluates the shared part once (a rotation: 16 instead of 26 vector operations per
+    8 bodies) and XLA fuses two rotations per kernel; it is used where its constant component
+    tests are sure to stay in the kernel, inside jaxsplit's own loops (``core._loops``).
+    Components first, each component is a row of its own: there the stack, which copies the
+    unchanged row, is the faster (the layout is chosen per run, ``COMPONENTS_FIRST_UP_TO``)."""
+    if first or not selects():
+        axis = 0 if first else -1
+        return jnp.stack([new.get(k, _component(x, k, first)) for k in range(x.shape[axis])], axis=axis)
+    index = jax.lax.broadcasted_iota(jnp.int32, x.shape, x.ndim - 1)
+    for k, value in new.items():
+        x = jnp.where(index == k, jnp.expand_dims(value, -1), x)
+    return x
+
+
 def _turn_axis(x, axis: int, c, s, first: bool = False):
     """R_k x from (cos θ/2, sin θ/2) (``half_cos_sin``), as an increment on the two components it
     changes: x_i + 2 sin(θ/2)(cos(θ/2) x_j − sin(θ/2) x_i), x_j − 2 sin(θ/2)(cos(θ/2) x_i + sin(θ/2) x_j)
@@ -236,11 +260,7 @@ def _turn_axis(x, axis: int, c, s, first: bool = False):
     i, j = (axis + 1) % 3, (axis + 2) % 3
     xi, xj = _component(x, i, first), _component(x, j, first)
     u = s + s
-    out = [None, None, None]
-    out[axis] = _component(x, axis, first)
-    out[i] = xi + u * (c * xj - s * xi)
-    out[j] = xj - u * (c * xi + s * xj)
-    return jnp.stack(out, axis=0 if first else -1)
+    return _with_components(x, {i: xi + u * (c * xj - s * xi), j: xj - u * (c * xi + s * xj)}, first)
 
 
 def rotate(x, axis: int, angle):
@@ -392,6 +412,20 @@ def _expand(a, extra: int):
     return a.reshape(a.shape + (1,) * extra)
 
 
+# The layout of a batch of bare m states (``for_run``). Components last, a rotation replaces two
+# components by a select (``_with_components``): one pass over the batch that evaluates the
+# polynomial once per state, two rotations per kernel; 1.1–1.3× faster than components first
+# for steps of 6 to 26 rotations, 32 to 10⁵ bodies (``benchmarks/layout.py``). Components first
+# (a kernel per rotation, each row contiguous) where that loses: a step of one or two rotations
+# fuses into one kernel that reads and writes the whole state, which XLA then copies every step
+# (the update reads other components, so it cannot be in place): 1.1–1.25× faster components
+# first; and angles above 1/4 (polynomials of 11 terms and more) make a kernel of two rotations
+# costly enough for XLA's cost model to split it over two threads, which at a few hundred bodies
+# costs more than the kernel (256 bodies, 1250 Blanes–Casas–Murua 8 steps: 2.8× slower).
+COMPONENTS_FIRST_UP_TO = 2
+COMPONENTS_LAST_UP_TO = POLYNOMIAL_LIMITS[1]
+
+
 class AbstractRotation(AbstractFlow):
     """A flow that turns m (and the declared parts) by an exact rotation whose angle is
     rate·(a component of m)·t: |m| is conserved, so a step made only of such flows bounds
@@ -419,8 +453,10 @@ class AbstractRotation(AbstractFlow):
         sub-steps |s| <= ``t`` (concrete values): ``"polynomial"`` where every flow of ``step``
         rotates the same parts (|m| is conserved) and the bound |rate|·max|m0|·t is at most
         ``POLYNOMIAL_LIMIT``, truncated for the smallest of ``POLYNOMIAL_LIMITS`` above the
-        bound (``angle_limit``); else ``"general"``. A batch of bare m states also gets its
-        components first."""
+        bound (``angle_limit``); else ``"general"``. A batch of bare m states gets its
+        components first unless the step is longer than ``COMPONENTS_FIRST_UP_TO`` rotations
+        and none of its angles exceeds ``COMPONENTS_LAST_UP_TO`` (decided alike by every
+        rotation of the step)."""
         flows = getattr(step, "flows", (self,))
         rotations = all(isinstance(f, AbstractRotation) and f.parts == self.parts for f in flows)
         m = _momentum_or_none(x0, self.parts) if rotations else None
@@ -428,8 +464,20 @@ class AbstractRotation(AbstractFlow):
         limit = next((L for L in POLYNOMIAL_LIMITS if bound is not None and bound <= L), POLYNOMIAL_LIMIT)
         kernel = "polynomial" if bound is not None and bound <= POLYNOMIAL_LIMIT else "general"
         first = (m is not None and self.parts is None and all(isinstance(f, AxisRotation) for f in flows)
-                 and m.ndim >= 2)
+                 and m.ndim >= 2 and not (getattr(step, "flows_per_step", 1) > COMPONENTS_FIRST_UP_TO
+                                          and _largest_angle(self, bound, step) <= COMPONENTS_LAST_UP_TO))
         return dataclasses.replace(self, kernel=kernel, angle_limit=limit, components_first=bool(first))
+
+
+def _largest_angle(rotation, bound, step) -> float:
+    """The largest angle bound over ``step``'s rotations, from ``rotation``'s own ``bound``
+    (each rotation's bound is |rate|·max|m0|·(its largest weight)·h)."""
+    if bound is None or not hasattr(step, "reach"):
+        return math.inf if bound is None else bound
+    weights = step.reach()
+    own = next(w * abs(float(np.max(np.abs(np.asarray(f.rate))))) for f, w in zip(step.flows, weights) if f is rotation)
+    largest = max(w * abs(float(np.max(np.abs(np.asarray(f.rate))))) for f, w in zip(step.flows, weights))
+    return bound * largest / own if own else math.inf
 
 
 def _check_batch(parameter_shape, state_batch):
@@ -569,9 +617,7 @@ def _turns_several(parts) -> bool:
 
 
 def _add_to_component(v, k: int, value, first: bool):
-    parts = [_component(v, q, first) for q in range(3)]
-    parts[k] = parts[k] + value
-    return jnp.stack(parts, axis=0 if first else -1)
+    return _with_components(v, {k: _component(v, k, first) + value}, first)
 
 
 class VectorRotation(AbstractRotation):
