@@ -1,6 +1,7 @@
 """The rotation kernel: polynomial cos/sin where the Casimir bounds every angle of a run,
 the general path elsewhere, chosen once per run and visible; batches components-first."""
 
+import dataclasses
 import math
 
 import jax
@@ -137,6 +138,33 @@ def test_a_batch_layout_follows_the_step_and_both_layouts_agree_bit_for_bit(monk
         assert step.for_run(states, h).structure_of_arrays == (layout == "first")
         runs[layout] = np.asarray(jaxsplit.integrate(step, states, h, 30, save_every=10).x)
     np.testing.assert_array_equal(runs["first"], runs["last"])
+
+
+def test_each_entry_of_a_word_gets_the_polynomial_of_its_own_bound():
+    """``for_run`` truncates the polynomial per word entry (``lower_limits``, ``for_weight``):
+    each entry's limit covers its own angle bound |rate|·max|m0|·|weight|·h, is never above the
+    run's, and the run agrees with one at the run's limit everywhere to round-off."""
+    states = jax.random.normal(jax.random.PRNGKey(5), (7, 3))
+    states = states / jnp.linalg.norm(states, axis=1, keepdims=True)
+    h = 0.5
+    step = jaxsplit.splitting(STANDARD, "blanes-casas-murua-8", "casimir")
+    fast = step.for_run(states, h)
+    assert any(f.lower_limits for f in fast.flows)  # at h = 0.5 some entries need fewer terms
+    largest = float(jnp.max(jnp.linalg.norm(states, axis=1)))
+    for piece, weight in step.entries():
+        flow = fast.flows[piece]
+        own = flow.for_weight(weight)
+        assert own.angle_limit <= flow.angle_limit
+        assert abs(float(flow.rate)) * largest * abs(weight) * h <= own.angle_limit
+    # must fail: the largest weight keeps the run's limit, and a smaller limit would not cover it
+    for piece, flow in enumerate(fast.flows):
+        top = step.reach()[piece]
+        assert flow.for_weight(top) is flow
+        smaller = [L for L in so3.POLYNOMIAL_LIMITS if L < flow.angle_limit]
+        assert all(abs(float(flow.rate)) * largest * top * h > L for L in smaller)
+    uniform = type(fast)(tuple(dataclasses.replace(f, lower_limits=()) for f in fast.flows), fast.word, fast.scheme,
+                         fast.fsal, fast.structure_of_arrays, fast.processing)
+    np.testing.assert_allclose(fast.advance(states, h, 200), uniform.advance(states, h, 200), atol=ROUNDOFF)
 
 
 def test_the_select_form_is_traced_only_inside_jaxsplits_loops():

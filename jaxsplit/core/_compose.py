@@ -10,6 +10,7 @@ of a given word length shares one compilation.
 """
 
 import dataclasses
+import functools
 from collections.abc import Sequence
 
 import equinox as eqx
@@ -102,7 +103,7 @@ def _apply(flows, w: Word, state, h):
         # The barrier keeps XLA from fusing a whole step into one kernel that recomputes
         # earlier sub-flows: without it the cost grows geometrically with the word length
         # (Kahan-Li 6 on the axes split: minutes per step), with it ~20 ns per rotation.
-        state = jax.lax.optimization_barrier(flows[piece](state, weight * h))
+        state = jax.lax.optimization_barrier(flows[piece].for_weight(weight)(state, weight * h))
     return state
 
 
@@ -171,6 +172,42 @@ def _components_first(state):
 
 def _components_last(state):
     return jnp.moveaxis(state, 0, -1)
+
+
+# Derived from a composition's static fields only, and asked for by every flow's ``for_run``
+# at every ``integrate`` call: cached, and reached by functions rather than methods (equinox
+# builds a module for every bound method looked up; Blanes–Casas–Murua 8: 67 µs per
+# ``entries()`` uncached).
+def entries_of(composition) -> Word:
+    """``Composition.entries``."""
+    return _entries(composition.word, composition._parts, composition.fsal)
+
+
+def reach_of(composition) -> tuple[float, ...]:
+    """``Composition.reach``."""
+    return _reach(entries_of(composition), len(composition.flows))
+
+
+@functools.cache
+def _sequences(parts, fsal: bool):
+    pre, kernel, post = parts
+    if not fsal:
+        return pre, kernel, post
+    (piece, first), middle, (_, last) = kernel[0], kernel[1:-1], kernel[-1]
+    return merge(pre + ((piece, first),)), middle + ((piece, last + first),), merge(((piece, -first),) + post)
+
+
+@functools.cache
+def _entries(word, parts, fsal: bool) -> Word:
+    return word + sum(_sequences(parts, fsal), ())
+
+
+@functools.cache
+def _reach(entries: Word, n_flows: int) -> tuple[float, ...]:
+    out = [0.0] * n_flows
+    for piece, weight in entries:
+        out[piece] = max(out[piece], abs(weight))
+    return tuple(out)
 
 
 def _remat(step):
@@ -242,13 +279,14 @@ class Composition(AbstractFlow):
     def is_group(self) -> bool:
         return False
 
+    def entries(self) -> Word:
+        """Every (piece, weight) sub-flow a call or a run may evaluate (sub-steps are weight·h),
+        merges across steps included."""
+        return entries_of(self)
+
     def reach(self) -> tuple[float, ...]:
-        """The largest |weight| each piece is called with (sub-steps are weight·h), merges
-        across steps included."""
-        out = [0.0] * len(self.flows)
-        for piece, weight in self.word + sum(self._sequences(), ()):
-            out[piece] = max(out[piece], abs(weight))
-        return tuple(out)
+        """The largest |weight| each piece is called with."""
+        return reach_of(self)
 
     def for_run(self, x0, h, step=None) -> "Composition":
         """The same map made fastest for a run from ``x0`` with steps |h'| <= |h| (and states
@@ -260,7 +298,7 @@ class Composition(AbstractFlow):
         if step is not None or any(isinstance(v, jax.core.Tracer) for v in jax.tree_util.tree_leaves((x0, h))):
             return self
         size = abs(float(np.asarray(h)))
-        flows = tuple(f.for_run(x0, w * size, self) for f, w in zip(self.flows, self.reach()))
+        flows = tuple(f.for_run(x0, w * size, self) for f, w in zip(self.flows, reach_of(self)))
         firsts = {f.components_first for f in flows}
         if len(firsts) > 1:  # all or none: the layout is the composition's
             flows = tuple(dataclasses.replace(f, components_first=False) if f.components_first else f
@@ -294,11 +332,7 @@ class Composition(AbstractFlow):
         (Kahan–Li 10 on three pieces: 7 s). The cost: one rotation per call, and round-off.
         A processed scheme's P opens the head and P⁻¹ closes the tail: n steps P⁻¹ ∘ K^n ∘ P
         (head and tail run once per call, rolled where long: ``_apply_once``)."""
-        pre, kernel, post = self._parts
-        if not self.fsal:
-            return pre, kernel, post
-        (piece, first), middle, (_, last) = kernel[0], kernel[1:-1], kernel[-1]
-        return merge(pre + ((piece, first),)), middle + ((piece, last + first),), merge(((piece, -first),) + post)
+        return _sequences(self._parts, self.fsal)
 
     def retrace(self, x_after, h, n, ct_after):
         """The reversible adjoint's backward pass over ``n`` steps: ``advance``'s exact
@@ -319,7 +353,8 @@ class Composition(AbstractFlow):
 
         def back_one(piece, weight, joint, acc, flows=self.flows, h=h):  # one sub-flow undone, cotangents added
             x, ct = unpack(joint)
-            x, ct, dp, dt = flows[piece].step_back(x, weight * h, ct)
+            flow = flows[piece].for_weight(weight) if isinstance(weight, float) else flows[piece]  # as _apply
+            x, ct, dp, dt = flow.step_back(x, weight * h, ct)
             grown = jax.tree_util.tree_map(jnp.add, acc[piece], (dp, weight * dt))
             return pack(x, ct), acc[:piece] + (grown,) + acc[piece + 1:]
 

@@ -88,6 +88,13 @@ class AbstractFlow(eqx.Module):
         ``so3``). Default: itself."""
         return self
 
+    def for_weight(self, weight: float) -> "AbstractFlow":
+        """This flow (as made by ``for_run``) for the sub-steps ``weight``·h of one entry of a
+        composition's word (``weight`` a Python float): a flow whose kernel depends on the size
+        of its sub-steps may take a cheaper one for a smaller weight (the rotations' polynomial,
+        truncated for the entry's own angle bound). Default: itself."""
+        return self
+
     @property
     def components_first(self) -> bool:
         """Whether this flow expects an array state with its components on the first axis

@@ -35,8 +35,10 @@ arithmetic; 1–3 terms fewer in all than the truncated Taylor series at the sam
 less time per rotation in a batch, ``benchmarks/kernel.py``). Accurate to round-off:
 measured ≤ 0.5 ulp, cos² + sin² − 1 ≤ 2 ulp, in ``tests/test_kernel.py``. The smaller the
 bound, the fewer the terms (float64: 8 for L = 1/16, 16 for L = 1), so L is the smallest of
-``POLYNOMIAL_LIMITS`` above the run's bound (``angle_limit``); a rotation evaluates the half
-angle (``half_cos_sin``), so its polynomial is truncated for L/2. The map is the same exact
+``POLYNOMIAL_LIMITS`` above the run's bound (``angle_limit``), and an entry of a composition's
+word with a smaller weight takes the smaller L its own bound allows (``lower_limits``,
+``for_weight``); a rotation evaluates the half angle (``half_cos_sin``), so its polynomial is
+truncated for L/2. The map is the same exact
 rotation; only its trigonometry is evaluated differently. ``for_run`` selects the kernel
 once per run from the initial state (``Composition.for_run``, called by ``integrate``); the
 ``"general"`` kernel is used otherwise. For a batch of free-body states a run also picks the
@@ -56,6 +58,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..core._compose import Composition, entries_of, reach_of
 from ..core._errors import InputError
 from ..core._flows import AbstractFlow
 from ..core._loops import selects
@@ -430,7 +433,8 @@ class AbstractRotation(AbstractFlow):
     """A flow that turns m (and the declared parts) by an exact rotation whose angle is
     rate·(a component of m)·t: |m| is conserved, so a step made only of such flows bounds
     every angle of a run in advance (``for_run``). Subclasses declare the static fields
-    ``kernel`` and ``angle_limit`` (see ``cos_sin``) and ``components_first``."""
+    ``kernel`` and ``angle_limit`` (see ``cos_sin``), ``components_first`` and ``lower_limits``
+    (the shorter polynomials of a composition's smaller weights, ``for_weight``)."""
 
     def __check_init__(self):
         if self.kernel not in KERNELS:
@@ -466,18 +470,48 @@ class AbstractRotation(AbstractFlow):
         first = (m is not None and self.parts is None and all(isinstance(f, AxisRotation) for f in flows)
                  and m.ndim >= 2 and not (getattr(step, "flows_per_step", 1) > COMPONENTS_FIRST_UP_TO
                                           and _largest_angle(self, bound, step) <= COMPONENTS_LAST_UP_TO))
-        return dataclasses.replace(self, kernel=kernel, angle_limit=limit, components_first=bool(first))
+        lower = _lower_limits(self, bound, limit, step) if kernel == "polynomial" else ()
+        return dataclasses.replace(self, kernel=kernel, angle_limit=limit, components_first=bool(first),
+                                   lower_limits=lower)
+
+    def for_weight(self, weight: float):
+        """This rotation with its polynomial truncated for the word entry's own angle bound
+        (``lower_limits``; ``angle_limit`` covers the largest weight)."""
+        limit = dict(self.lower_limits).get(abs(weight), self.angle_limit)
+        return self if limit == self.angle_limit else dataclasses.replace(self, angle_limit=limit)
+
+
+def _lower_limits(rotation, bound, limit, step) -> tuple:
+    """((|weight|, limit), ...) for the entries of ``step``'s word that call ``rotation`` with
+    a weight whose angle bound (``bound`` scaled by the weight over the largest) lies under a
+    smaller one of ``POLYNOMIAL_LIMITS`` than ``limit``: a polynomial shorter by a term or more
+    (Blanes–Casas–Murua 8 at h = 0.5 on the standard body: 10 of one piece's 13 rotations).
+    Discrete, so a new h or body recompiles only when a choice changes."""
+    if not isinstance(step, Composition):
+        return ()
+    piece = next(k for k, f in enumerate(step.flows) if f is rotation)
+    weights = _weights_of(entries_of(step), piece)
+    out = []
+    for w in weights:
+        own = next(L for L in POLYNOMIAL_LIMITS if bound * w / weights[-1] <= L or L == limit)
+        if own < limit:
+            out.append((w, own))
+    return tuple(out)
+
+
+@functools.cache
+def _weights_of(entries, piece: int) -> tuple[float, ...]:
+    return tuple(sorted({abs(w) for p, w in entries if p == piece}))
 
 
 def _largest_angle(rotation, bound, step) -> float:
     """The largest angle bound over ``step``'s rotations, from ``rotation``'s own ``bound``
     (each rotation's bound is |rate|·max|m0|·(its largest weight)·h)."""
-    if bound is None or not hasattr(step, "reach"):
+    if bound is None or not isinstance(step, Composition):
         return math.inf if bound is None else bound
-    weights = step.reach()
-    own = next(w * abs(float(np.max(np.abs(np.asarray(f.rate))))) for f, w in zip(step.flows, weights) if f is rotation)
-    largest = max(w * abs(float(np.max(np.abs(np.asarray(f.rate))))) for f, w in zip(step.flows, weights))
-    return bound * largest / own if own else math.inf
+    scaled = [(f, w * float(np.max(np.abs(np.asarray(f.rate))))) for f, w in zip(step.flows, reach_of(step))]
+    own = next(value for f, value in scaled if f is rotation)
+    return bound * max(value for _, value in scaled) / own if own else math.inf
 
 
 def _check_batch(parameter_shape, state_batch):
@@ -546,6 +580,7 @@ class AxisRotation(AbstractRotation):
     kernel: str = eqx.field(static=True, default="general")
     angle_limit: float = eqx.field(static=True, default=POLYNOMIAL_LIMIT)
     components_first: bool = eqx.field(static=True, default=False)
+    lower_limits: tuple = eqx.field(static=True, default=())
 
     def __check_init__(self):
         _check_axis(self.axis)
@@ -637,6 +672,7 @@ class VectorRotation(AbstractRotation):
     kernel: str = eqx.field(static=True, default="general")
     angle_limit: float = eqx.field(static=True, default=POLYNOMIAL_LIMIT)
     components_first: bool = eqx.field(static=True, default=False)  # never set: acts on the last axis
+    lower_limits: tuple = eqx.field(static=True, default=())
 
     def __call__(self, state, t):
         m = self._momentum(state)
