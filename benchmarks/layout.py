@@ -36,7 +36,8 @@ CASES = (("strang", 32, 50_000, 0.05), ("strang", 256, 20_000, 0.05), ("strang",
          ("kahan-li-6", 256, 2000, 0.5), ("yoshida-6a", 10**4, 100, 0.2),
          ("kahan-li-8", 32, 4000, 0.5), ("kahan-li-8", 256, 2000, 0.5), ("kahan-li-8", 4096, 200, 0.5),
          ("kahan-li-8", 10**5, 10, 0.5),
-         ("blanes-casas-murua-8", 32, 4000, 0.5), ("blanes-casas-murua-8", 256, 1250, 0.8),
+         ("blanes-casas-murua-8", 32, 4000, 0.5), ("blanes-casas-murua-8", 256, 640, 1.5625),
+         ("blanes-casas-murua-8", 256, 1250, 0.8),
          ("blanes-casas-murua-8", 256, 2000, 0.5),
          ("blanes-casas-murua-8", 4096, 200, 0.5))
 QUICK = (0, 2, 6, 10, 14)
