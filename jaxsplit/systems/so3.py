@@ -425,9 +425,11 @@ def _expand(a, extra: int):
 # (a kernel per rotation, each row contiguous) where that loses: a step of one or two rotations
 # fuses into one kernel that reads and writes the whole state, which XLA then copies every step
 # (the update reads other components, so it cannot be in place): 1.1–1.25× faster components
-# first; and angles above 1/4 (polynomials of 11 terms and more) make a kernel of two rotations
-# costly enough for XLA's cost model to split it over two threads, which at a few hundred bodies
-# costs more than the kernel (256 bodies, 1250 Blanes–Casas–Murua 8 steps: 2.8× slower).
+# first; and angles above 1/4 (polynomials of 11 terms and more) can make a kernel of two
+# rotations costly enough for XLA's cost model to split it over two threads, which at a few
+# hundred bodies costs more than the kernel (256 bodies, Blanes–Casas–Murua 8, 640 steps: 1.6×
+# slower components last). The angle rule is conservative: at 1250 steps, where most of the
+# word's entries take shorter polynomials (``lower_limits``), components last is 1.1× faster.
 COMPONENTS_FIRST_UP_TO = 2
 COMPONENTS_LAST_UP_TO = POLYNOMIAL_LIMITS[1]
 
