@@ -427,7 +427,7 @@ def _expand(a, extra: int):
 # (the update reads other components, so it cannot be in place): 1.1–1.25× faster components
 # first; and angles above 1/4 (polynomials of 11 terms and more) can make a kernel of two
 # rotations costly enough for XLA's cost model to split it over two threads, which at a few
-# hundred bodies costs more than the kernel (256 bodies, Blanes–Casas–Murua 8, 640 steps: 1.6×
+# hundred bodies costs more than the kernel (256 bodies, Blanes–Casas–Murua 8, 640 steps: 1.2–1.6×
 # slower components last). The angle rule is conservative: at 1250 steps, where most of the
 # word's entries take shorter polynomials (``lower_limits``), components last is 1.1× faster.
 COMPONENTS_FIRST_UP_TO = 2
