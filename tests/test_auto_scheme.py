@@ -88,6 +88,25 @@ def test_round_off_at_the_smallest_pilot_steps_is_not_read_as_truncation_error()
     assert row["error_constant"] == pytest.approx(constant, rel=1e-9)
 
 
+def test_a_batch_is_costed_as_a_batch_in_either_layout():
+    """The cost model weighs a batch's rotations by the batch table whichever layout ``for_run``
+    gives it (components last for a long word at small angles, first for Strang)."""
+    from jaxsplit.systems import _auto
+
+    states = jnp.asarray(np.random.default_rng(1).standard_normal((16, 3)))
+    states = states / jnp.linalg.norm(states, axis=1, keepdims=True)
+    hs, t = 1.5 * 2.0 ** -np.arange(0, 7.5, 0.5), 20.0
+    for scheme, first in (("kahan-li-8", False), ("strang", True)):
+        step = jaxsplit.splitting(BODY, scheme, "casimir")
+        p = step.scheme.order
+        row = _auto._candidate(step, step.scheme, "casimir", {}, hs, 1e-3 * hs**p * t, t, 1e-8, 100.0, states,
+                               (2.2e-13, 1e-3))
+        fast = step.for_run(states, row["h"])
+        assert fast.structure_of_arrays == first and fast.kernel == "polynomial"
+        per_rotation = _auto.POLYNOMIAL_COST["batch"][max(f.angle_limit for f in fast.flows)]
+        assert row["cost"] == pytest.approx(row["n_steps"] * fast.flows_per_step * per_rotation)
+
+
 def test_bad_requests_are_one_line_errors():
     with pytest.raises(InputError, match="tol must be a positive number"):
         jaxsplit.auto_splitting(BODY, M0, tol=0.0, t_end=10.0)

@@ -19,6 +19,7 @@ import inspect
 import math
 from typing import NamedTuple
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -183,7 +184,8 @@ def _candidate(step, scheme, split, options, hs, errors, pilot_time, tol, t_end,
     n_steps = max(1, math.ceil(t_end / h))
     h = t_end / n_steps
     fast = step.for_run(x0, h)
-    layout = "batch" if fast.structure_of_arrays else "one state"
+    # a batch of bare m states, whichever layout for_run gave it (components last for long words)
+    layout = "batch" if fast.structure_of_arrays or (eqx.is_array(x0) and jnp.ndim(x0) >= 2) else "one state"
     if fast.kernel == "polynomial":
         per_rotation = POLYNOMIAL_COST[layout][max(f.angle_limit for f in fast.flows)]
     else:
