@@ -230,8 +230,8 @@ class Composition(AbstractFlow):
     ``h``. Static: ``word`` (the merged (piece, weight) sequence), ``scheme`` and ``fsal``
     (first-same-as-last merging across steps in ``advance``) and ``structure_of_arrays``.
     ``for_run`` returns the same map made fastest for one run (each flow's kernel; for a
-    batch, the components moved first inside the step: ``structure_of_arrays``, invisible
-    from outside).
+    batch, the layout: the components moved first inside the step where that is faster,
+    ``structure_of_arrays``, see ``so3.COMPONENTS_FIRST_UP_TO``; invisible from outside).
 
     >>> import jax.numpy as jnp, jaxsplit
     >>> step = jaxsplit.splitting(jaxsplit.RigidBody([2.0, 1.0, 0.5]), "strang", "casimir", shift=1)
