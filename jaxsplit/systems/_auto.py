@@ -185,7 +185,7 @@ def _candidate(step, scheme, split, options, hs, errors, pilot_time, tol, t_end,
     h = t_end / n_steps
     fast = step.for_run(x0, h)
     # a batch of bare m states, whichever layout for_run gave it (components last for long words)
-    layout = "batch" if fast.structure_of_arrays or (eqx.is_array(x0) and jnp.ndim(x0) >= 2) else "one state"
+    layout = "batch" if eqx.is_array(x0) and jnp.ndim(x0) >= 2 else "one state"
     if fast.kernel == "polynomial":
         per_rotation = POLYNOMIAL_COST[layout][max(f.angle_limit for f in fast.flows)]
     else:
