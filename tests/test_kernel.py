@@ -2,6 +2,7 @@
 the general path elsewhere, chosen once per run and visible; batches components-first."""
 
 import dataclasses
+import gc
 import math
 
 import jax
@@ -64,6 +65,27 @@ def test_the_run_picks_the_kernel_from_the_casimir_bound():
     kick = jaxsplit.FunctionFlow(lambda m, t: m * (1 + t))
     assert jaxsplit.compose(STANDARD.split("casimir") + (kick,), "strang").for_run(M0, 0.1).kernel == "general"
 
+
+
+def test_a_runs_preparation_is_remembered_per_step_and_choice_and_goes_with_the_step():
+    """``for_run`` builds each choice once per step object (a loop of ``integrate`` calls does not
+    rebuild the prepared flows), a changed choice gets its own prepared step, and the memo
+    neither outlives the step nor grows past ``KEPT`` choices."""
+    from jaxsplit.core import _memo
+
+    step = jaxsplit.splitting(STANDARD, "kahan-li-6", "casimir")
+    small = step.for_run(M0, 0.1)
+    assert step.for_run(M0, 0.1) is small and small.for_run(M0, 0.1) is small
+    large = step.for_run(M0, 1.0)  # angles ~10x: a longer polynomial
+    assert large is not small and large.flows[0].angle_limit > small.flows[0].angle_limit
+    assert step.for_run(M0, 0.1) is small  # the first choice is still its own
+    for k in range(2 * _memo.KEPT):  # many distinct choices (bounds) on a fresh step
+        step.for_run(M0 * (1 + k), 0.1)
+    assert len(_memo._BY_OWNER[id(step)][1]) <= _memo.KEPT
+    before = _memo.remembered()
+    del step, small, large
+    gc.collect()
+    assert _memo.remembered() < before
 
 
 def test_the_bound_is_reduced_where_the_batch_lives():

@@ -21,6 +21,7 @@ import numpy as np
 from ._errors import InputError
 from ._flows import AbstractFlow, as_flow, split_parameters, sum_to_shape
 from ._loops import repeated, threaded
+from ._memo import derived
 from ._schemes import Scheme, schemes
 from ._state import float_dtype
 
@@ -175,17 +176,17 @@ def _components_last(state):
 
 
 # Derived from a composition's static fields only, and asked for by every flow's ``for_run``
-# at every ``integrate`` call: cached, and reached by functions rather than methods (equinox
-# builds a module for every bound method looked up; Blanes–Casas–Murua 8: 67 µs per
-# ``entries()`` uncached).
+# at every ``integrate`` call: cached (by the word, and per object: hashing a long word took
+# 5 µs a call), and reached by functions rather than methods (equinox builds a module for
+# every bound method looked up, 20 µs; Blanes–Casas–Murua 8: 67 µs per ``entries()`` uncached).
 def entries_of(composition) -> Word:
     """``Composition.entries``."""
-    return _entries(composition.word, composition._parts, composition.fsal)
+    return derived(composition, "entries", lambda: _entries(composition.word, composition._parts, composition.fsal))
 
 
 def reach_of(composition) -> tuple[float, ...]:
     """``Composition.reach``."""
-    return _reach(entries_of(composition), len(composition.flows))
+    return derived(composition, "reach", lambda: _reach(entries_of(composition), len(composition.flows)))
 
 
 @functools.cache
@@ -298,12 +299,18 @@ class Composition(AbstractFlow):
         if step is not None or any(isinstance(v, jax.core.Tracer) for v in jax.tree_util.tree_leaves((x0, h))):
             return self
         size = abs(float(np.asarray(h)))
-        flows = tuple(f.for_run(x0, w * size, self) for f, w in zip(self.flows, reach_of(self)))
+        # through the class: a bound method of an equinox module is a module built per lookup (20 µs)
+        flows = tuple(type(f).for_run(f, x0, w * size, self) for f, w in zip(self.flows, reach_of(self)))
         firsts = {f.components_first for f in flows}
         if len(firsts) > 1:  # all or none: the layout is the composition's
             flows = tuple(dataclasses.replace(f, components_first=False) if f.components_first else f
                           for f in flows)
-        return Composition(flows, self.word, self.scheme, self.fsal, firsts == {True}, self.processing)
+        soa = firsts == {True}
+        if soa == self.structure_of_arrays and all(f is g for f, g in zip(flows, self.flows)):
+            return self
+        # keyed by the prepared flows themselves: the remembered composition holds them, so their ids stay theirs
+        return derived(self, (tuple(map(id, flows)), soa),
+                       lambda: Composition(flows, self.word, self.scheme, self.fsal, soa, self.processing))
 
     @property
     def kernels(self) -> tuple[str, ...]:

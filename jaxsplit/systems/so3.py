@@ -62,6 +62,7 @@ from ..core._compose import Composition, entries_of, reach_of
 from ..core._errors import InputError
 from ..core._flows import AbstractFlow
 from ..core._loops import selects
+from ..core._memo import derived
 from ..core._state import fits_batch
 
 PARTS = ("momentum", "vector", "attitude", "quaternion", "fixed")
@@ -476,8 +477,11 @@ class AbstractRotation(AbstractFlow):
                  and m.ndim >= 2 and not (getattr(step, "flows_per_step", 1) > COMPONENTS_FIRST_UP_TO
                                           and _largest_angle(self, bound, step) <= COMPONENTS_LAST_UP_TO))
         lower = _lower_limits(self, bound, limit, step) if kernel == "polynomial" else ()
-        return dataclasses.replace(self, kernel=kernel, angle_limit=limit, components_first=bool(first),
-                                   lower_limits=lower)
+        choice = (kernel, limit, bool(first), lower)
+        if choice == (self.kernel, self.angle_limit, self.components_first, self.lower_limits):
+            return self
+        return derived(self, choice, lambda: dataclasses.replace(self, kernel=kernel, angle_limit=limit,
+                                                                  components_first=bool(first), lower_limits=lower))
 
     def for_weight(self, weight: float):
         """This rotation with its polynomial truncated for the word entry's own angle bound
@@ -495,7 +499,7 @@ def _lower_limits(rotation, bound, limit, step) -> tuple:
     if not isinstance(step, Composition):
         return ()
     piece = next(k for k, f in enumerate(step.flows) if f is rotation)
-    weights = _weights_of(entries_of(step), piece)
+    weights = derived(step, ("weights", piece), lambda: _weights_of(entries_of(step), piece))
     out = []
     for w in weights:
         own = next(L for L in POLYNOMIAL_LIMITS if bound * w / weights[-1] <= L or L == limit)
@@ -514,9 +518,13 @@ def _largest_angle(rotation, bound, step) -> float:
     (each rotation's bound is |rate|·max|m0|·(its largest weight)·h)."""
     if bound is None or not isinstance(step, Composition):
         return math.inf if bound is None else bound
-    scaled = [(f, w * float(np.max(np.abs(np.asarray(f.rate))))) for f, w in zip(step.flows, reach_of(step))]
-    own = next(value for f, value in scaled if f is rotation)
-    return bound * max(value for _, value in scaled) / own if own else math.inf
+    scaled = derived(step, "scaled reach", lambda: tuple(w * _largest_rate(f.rate) for f, w in zip(step.flows, reach_of(step))))
+    own = next(value for f, value in zip(step.flows, scaled) if f is rotation)
+    return bound * max(scaled) / own if own else math.inf
+
+
+def _largest_rate(rate) -> float:
+    return float(np.max(np.abs(np.asarray(rate))))
 
 
 def _check_batch(parameter_shape, state_batch):
@@ -542,7 +550,7 @@ def _angle_bound(rate, m, t):
     a value is traced)."""
     if any(isinstance(v, jax.core.Tracer) for v in (m, t, rate)):
         return None
-    return float(np.max(np.abs(np.asarray(rate)))) * _largest_norm(m) * abs(float(t)) * (1 + 1e-6)
+    return _largest_rate(rate) * _largest_norm(m) * abs(float(t)) * (1 + 1e-6)
 
 
 def _largest_norm(m) -> float:
