@@ -508,8 +508,7 @@ def _lower_limits(rotation, bound, limit, step) -> tuple:
     return tuple(out)
 
 
-@functools.cache
-def _weights_of(entries, piece: int) -> tuple[float, ...]:
+def _weights_of(entries, piece: int) -> tuple[float, ...]:  # remembered per step by ``_lower_limits``
     return tuple(sorted({abs(w) for p, w in entries if p == piece}))
 
 
