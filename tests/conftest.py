@@ -48,3 +48,13 @@ def executed_notebooks(tmp_path_factory):
     hooks = docs_hooks()
     out = tmp_path_factory.mktemp("executed") / "notebooks"
     return out, hooks.execute_notebooks(hooks.NOTEBOOKS, out)
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist reads the groups
+def pytest_collection_modifyitems(items):
+    """Whole files to one worker (``--dist loadgroup``): a file's tests share its module fixtures
+    and the programs JAX has compiled for them, which a worker otherwise builds again. Tests with
+    an ``xdist_group`` of their own (shared across files, or a heavy file split) keep it."""
+    for item in items:
+        if not item.get_closest_marker("xdist_group"):
+            item.add_marker(pytest.mark.xdist_group(item.path.stem))
