@@ -22,6 +22,8 @@ import functools
 import equinox as eqx
 import jax
 
+from ._one_kernel import one_kernel
+
 _SELECTS = contextvars.ContextVar("jaxsplit_selects", default=False)
 
 
@@ -53,8 +55,8 @@ def threaded(body, carry, invariants, n):
         return jax.lax.optimization_barrier((state, inv))
 
     if isinstance(n, int):
-        return jax.lax.scan(lambda c, _: (through(c), None), (carry, arrays), length=n)[0][0]
-    return jax.lax.fori_loop(0, n, lambda _, c: through(c), (carry, arrays))[0]
+        return one_kernel(lambda c: jax.lax.scan(lambda c, _: (through(c), None), c, length=n)[0][0], (carry, arrays))
+    return one_kernel(lambda c, n: jax.lax.fori_loop(0, n, lambda _, c: through(c), c)[0], (carry, arrays), n)
 
 
 def repeated(body, carry, invariants, n: int, remat=lambda f: f):

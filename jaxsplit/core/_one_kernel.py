@@ -1,0 +1,115 @@
+"""A stepping loop compiled into one CPU kernel, for jaxsplit's own programs only.
+
+XLA's CPU runtime runs a ``while`` loop as one dispatched kernel per fused operation per
+iteration, unless one iteration touches fewer bytes than a process-wide threshold
+(``_xla_cpu``): then a late pass wraps the loop in a ``call`` tagged ``xla_cpu_small_call``,
+compiled as one kernel. A composition step on a few hundred bodies (13 fused rotations a
+step for Blanes–Casas–Murua 8 at 256 bodies) is above any threshold that leaves other
+programs alone, and its dispatches were a quarter of its time. Raising the threshold for
+the process speeds diffrax's loops more than ours (its steps are more kernels).
+
+So ``one_kernel`` makes the call itself, tagged as that pass would tag it (and
+``inlineable="false"``, which keeps XLA's call inliner off it), for this loop alone. Free
+bodies, Casimir split (``benchmarks/results/one_kernel.md``): Kahan–Li 8 and
+Blanes–Casas–Murua 8 1.2–1.3× faster at 256 bodies, 1.7× at 64 (Kahan–Li 8, whose loop is
+above XLA's threshold there), 1.03–1.07× at 1024–2048, bit-identical; 256 heavy tops 1.13×,
+7e-13 apart after 2,000 steps (XLA fuses the uninlined loop otherwise: another rounding).
+The tag is decided when the program is lowered for the CPU, where the shapes are final
+(a ``vmap`` has added its axis):
+
+* only while the loop's state is at most ``ONE_KERNEL_BYTES``: at 4096 bodies (96 KiB) it
+  ties, at 16384 it loses 1.4–1.8×, as a single kernel is never split over threads;
+* only where every operation inside is one the one-kernel emitter compiles: the pass's own
+  exclusions (custom calls, scatter, sort, FFT, in/outfeed, replica and partition ids,
+  collectives) and, for safety, dots, convolutions and random bits, which XLA may hand to
+  a library or runtime call that emitter does not take (a user's flow with ``x.at[i].add``
+  runs untagged);
+* never on another backend (a GPU compiles the loop as before).
+
+``ONE_KERNEL_BYTES = -1`` turns the tag off (read at lowering: new programs only).
+Untagged, the loop is the same nested ``jit``, inlined by XLA: the program it was before.
+"""
+
+import jax
+import numpy as np
+from jax.interpreters import ad, batching, mlir
+
+ONE_KERNEL_BYTES = 64 * 2**10
+TAGS = {"xla_cpu_small_call": "true", "inlineable": "false"}
+
+# stablehlo operations the one-kernel emitter cannot compile (XLA's small-while-loop pass
+# refuses such loops), and for safety dots, convolutions, random bits, tokens and composites
+# (whose decompositions this walk does not follow): see the module docstring
+_REFUSED = ("custom_call", "scatter", "sort", "fft", "infeed", "outfeed", "partition_id", "replica_id",
+            "all_reduce", "all_gather", "all_to_all", "reduce_scatter", "collective_permute",
+            "collective_broadcast", "send", "recv", "dot", "dot_general", "convolution", "rng",
+            "rng_bit_generator", "after_all", "create_token", "composite")
+_DIALECTS = ("stablehlo.", "chlo.", "func.")
+
+
+def one_kernel(loop, *args):
+    """``loop(*args)`` (a ``lax.scan`` or ``fori_loop`` of a step) as one call, tagged on the
+    CPU to compile into one kernel where that is faster (see the module docstring)."""
+    out = jax.jit(loop)(*args)
+    leaves, tree = jax.tree_util.tree_flatten(out)
+    return jax.tree_util.tree_unflatten(tree, _one_kernel_p.bind(*leaves))
+
+
+_one_kernel_p = jax.extend.core.Primitive("jaxsplit_one_kernel")
+_one_kernel_p.multiple_results = True
+_one_kernel_p.def_impl(lambda *xs: xs)
+_one_kernel_p.def_abstract_eval(lambda *avals: avals)
+batching.primitive_batchers[_one_kernel_p] = lambda args, dims: (_one_kernel_p.bind(*args), dims)
+# the identity to differentiation: tangents pass untouched, so there is nothing to transpose
+ad.primitive_jvps[_one_kernel_p] = lambda primals, tangents: (_one_kernel_p.bind(*primals), tangents)
+
+
+def _state_bytes(avals) -> int:
+    return sum(int(np.prod(a.shape)) * np.dtype(a.dtype).itemsize for a in avals)
+
+
+def _operations(op):
+    for region in op.regions:
+        for block in region.blocks:
+            for inner in block.operations:
+                yield inner
+                yield from _operations(inner)
+
+
+def _compilable(function, symbols, seen) -> bool:
+    """Every operation reachable from ``function`` (through calls) is one the one-kernel
+    emitter compiles."""
+    for op in _operations(function):
+        name = op.operation.name
+        if not name.startswith(_DIALECTS) or name.split(".", 1)[1] in _REFUSED:
+            return False
+        if name == "func.call":
+            callee = mlir.ir.FlatSymbolRefAttr(op.attributes["callee"]).value
+            if callee not in seen:
+                seen.add(callee)
+                if not _compilable(symbols[callee], symbols, seen):
+                    return False
+    return True
+
+
+def _tag_on_cpu(ctx, *values):
+    try:
+        owners = {None if isinstance(v.owner, mlir.ir.Block) else v.owner.operation for v in values}
+        call = owners.pop()
+        if (not owners and call is not None and call.name == "func.call"
+                and _state_bytes(ctx.avals_in) <= ONE_KERNEL_BYTES):
+            module = ctx.module_context
+            callee = mlir.ir.FlatSymbolRefAttr(call.attributes["callee"]).value
+            symbols = module.symbol_table
+            if _compilable(symbols[callee], symbols, {callee}):
+                existing = {a.name: a.attr for a in mlir.ir.DictAttr(call.attributes["mhlo.frontend_attributes"])} \
+                    if "mhlo.frontend_attributes" in call.attributes else {}
+                tags = {k: mlir.ir.StringAttr.get(v) for k, v in TAGS.items()}
+                call.attributes["mhlo.frontend_attributes"] = mlir.ir.DictAttr.get(existing | tags)
+    except Exception:  # noqa: BLE001 -- an unexpected IR (another JAX): the loop runs untagged, as before
+        pass
+    return values
+
+
+mlir.register_lowering(_one_kernel_p, lambda ctx, *values: values, cacheable=False)
+mlir.register_lowering(_one_kernel_p, _tag_on_cpu, platform="cpu", cacheable=False)

@@ -1,0 +1,111 @@
+"""The stepping loop as one CPU kernel (``jaxsplit.core._one_kernel``): tagged where it pays
+and can compile, untagged otherwise, the same results either way."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxsplit
+from jaxsplit.core import _one_kernel
+
+OURS = 'inlineable="false"'  # XLA's own small-loop pass tags xla_cpu_small_call alone
+
+
+def states(b):
+    m = np.random.default_rng(1).standard_normal((b, 3))
+    return jnp.asarray(m / np.linalg.norm(m, axis=1, keepdims=True))
+
+
+@pytest.fixture
+def limit():
+    """Set ``ONE_KERNEL_BYTES`` for the test (caches cleared: programs are lowered anew)."""
+    def set_limit(value):
+        _one_kernel.ONE_KERNEL_BYTES = value
+        jax.clear_caches()
+
+    default = _one_kernel.ONE_KERNEL_BYTES
+    yield set_limit
+    set_limit(default)
+
+
+def program(fn, *args):
+    return jax.jit(fn).lower(*args).compile().as_text()
+
+
+def free_run(scheme, b, n=300, h=0.3):
+    body = jaxsplit.RigidBody(jnp.asarray(jaxsplit.STANDARD_CASE.inertia))
+    x0 = states(b)
+    step = jaxsplit.splitting(body, scheme, "casimir").for_run(x0, h)
+    return (lambda x: jaxsplit.integrate(step, x, h, n).final), x0
+
+
+@pytest.mark.parametrize("scheme", ["strang", "blanes-casas-murua-8"])
+def test_a_batch_under_the_limit_runs_tagged_and_equal_to_the_untagged_loop(limit, scheme):
+    run, x0 = free_run(scheme, 256)
+    assert OURS in program(run, x0)
+    tagged = jax.jit(run)(x0)
+    limit(-1)
+    assert OURS not in program(run, x0)
+    np.testing.assert_array_equal(np.asarray(jax.jit(run)(x0)), np.asarray(tagged))  # measured bit-identical
+
+
+def test_the_limit_counts_the_state_as_lowered_vmapped_batches_included(limit):
+    limit(4 * 2**10)  # 170 float64 bodies
+    small, x_small = free_run("strang", 128)
+    large, x_large = free_run("strang", 256)
+    assert OURS in program(small, x_small) and OURS not in program(large, x_large)
+    one, x_one = free_run("strang", 1)
+    batched = jax.vmap(lambda x: one(x[None])[0])
+    assert OURS in program(batched, x_small[:128]) and OURS not in program(batched, x_large)
+
+
+def shear_flows(write):
+    """Two exact shears of (q, p), written with ``write(x, k, value)``."""
+    return [lambda x, t: write(x, 0, x[0] + t * x[1]), lambda x, t: write(x, 1, x[1] - t * x[0])]
+
+
+WRITES = {
+    "stack (tagged)": lambda x, k, v: jnp.stack([v if i == k else x[i] for i in range(2)]),
+    "scatter": lambda x, k, v: x.at[k].set(v),
+    "dot": lambda x, k, v: x + (v - x[k]) * (jnp.eye(2, dtype=x.dtype) @ (jnp.arange(2) == k).astype(x.dtype)),
+    "sort": lambda x, k, v: jnp.stack([v if i == k else x[i] for i in range(2)]) + 0 * jnp.sort(x)[0],
+    "custom call (solve)": lambda x, k, v: jnp.linalg.solve(jnp.eye(2, dtype=x.dtype),
+                                                             jnp.stack([v if i == k else x[i] for i in range(2)])),
+}
+
+
+@pytest.mark.parametrize("kind", list(WRITES))
+def test_a_loop_with_an_operation_the_kernel_emitter_refuses_runs_untagged_and_right(kind):
+    step = jaxsplit.compose(shear_flows(WRITES[kind]), "strang")
+    x0, h, n = jnp.array([1.0, 0.0]), 0.01, 400
+
+    def run(x):
+        return jaxsplit.integrate(step, x, h, n).final
+
+    assert (OURS in program(run, x0)) == (kind == "stack (tagged)")
+    expected = np.array([1.0, 0.0])
+    for _ in range(n):  # Strang: half shear of q, shear of p, half shear of q
+        expected[0] += h / 2 * expected[1]
+        expected[1] -= h * expected[0]
+        expected[0] += h / 2 * expected[1]
+    np.testing.assert_allclose(np.asarray(jax.jit(run)(x0)), expected, rtol=0, atol=1e-13)
+
+
+def test_other_backends_never_get_the_tag():
+    run, x0 = free_run("blanes-casas-murua-8", 256)
+    for platform, tagged in (("cpu", True), ("cuda", False)):
+        text = jax.export.export(jax.jit(run), platforms=[platform])(x0).mlir_module()
+        assert ("xla_cpu_small_call" in text) == tagged, platform
+
+
+def test_the_reversible_gradient_runs_tagged_both_ways_and_matches_the_untagged_one(limit):
+    def loss(inertia):  # the forward run and the backward pass (stepping back) are both loops
+        step = jaxsplit.splitting(jaxsplit.RigidBody(inertia), "strang", "casimir", shift=1)
+        return jnp.sum(jaxsplit.integrate(step, states(64), 0.05, 500, adjoint="reversible").final ** 3)
+
+    inertia = jnp.asarray(jaxsplit.STANDARD_CASE.inertia)
+    assert program(jax.grad(loss), inertia).count(OURS) >= 2
+    tagged = jax.jit(jax.grad(loss))(inertia)
+    limit(-1)
+    np.testing.assert_allclose(np.asarray(jax.jit(jax.grad(loss))(inertia)), np.asarray(tagged), rtol=1e-12)
