@@ -28,7 +28,7 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp
 import numpy as np
-from _common import finish, header, interleaved, log, machine_info, scheme_label
+from _common import finish, header, interleaved, log, machine_info, ready, scheme_label
 
 import jaxsplit
 from jaxsplit.core import _one_kernel
@@ -94,8 +94,7 @@ def main():
         (on, tag_on), (off, tag_off) = compiled(fn, fn_args, True), compiled(fn, fn_args, False)
         difference = max(float(np.max(np.abs(np.asarray(a) - np.asarray(b))))
                          for a, b in zip(jax.tree_util.tree_leaves(on(*fn_args)), jax.tree_util.tree_leaves(off(*fn_args))))
-        times = interleaved({"on": lambda: jax.block_until_ready(on(*fn_args)),
-                             "off": lambda: jax.block_until_ready(off(*fn_args))}, args.rounds)
+        times = interleaved({"on": ready(on, *fn_args), "off": ready(off, *fn_args)}, args.rounds)
         row = {"case": name, "one_kernel_s": statistics.median(times["on"]), "thunks_s": statistics.median(times["off"]),
                "tagged": tag_on, "untagged_has_tag": tag_off, "difference": difference}
         row["speedup"] = row["thunks_s"] / row["one_kernel_s"]

@@ -55,7 +55,7 @@ def test_the_limit_counts_the_state_as_lowered_vmapped_batches_included(limit):
     small, x_small = free_run("strang", 128)
     large, x_large = free_run("strang", 256)
     assert OURS in program(small, x_small) and OURS not in program(large, x_large)
-    one, x_one = free_run("strang", 1)
+    one, _ = free_run("strang", 1)
     batched = jax.vmap(lambda x: one(x[None])[0])
     assert OURS in program(batched, x_small[:128]) and OURS not in program(batched, x_large)
 

@@ -92,22 +92,28 @@ def _compilable(function, symbols, seen) -> bool:
     return True
 
 
+def _call_to_tag(ctx, values):
+    """The ``func.call`` producing ``values`` if the loop should run as one kernel, else None."""
+    owners = {None if isinstance(v.owner, mlir.ir.Block) else v.owner.operation for v in values}
+    call = owners.pop()
+    if owners or call is None or call.name != "func.call" or _state_bytes(ctx.avals_in) > ONE_KERNEL_BYTES:
+        return None
+    callee = mlir.ir.FlatSymbolRefAttr(call.attributes["callee"]).value
+    symbols = ctx.module_context.symbol_table
+    return call if _compilable(symbols[callee], symbols, {callee}) else None
+
+
 def _tag_on_cpu(ctx, *values):
     try:
-        owners = {None if isinstance(v.owner, mlir.ir.Block) else v.owner.operation for v in values}
-        call = owners.pop()
-        if (not owners and call is not None and call.name == "func.call"
-                and _state_bytes(ctx.avals_in) <= ONE_KERNEL_BYTES):
-            module = ctx.module_context
-            callee = mlir.ir.FlatSymbolRefAttr(call.attributes["callee"]).value
-            symbols = module.symbol_table
-            if _compilable(symbols[callee], symbols, {callee}):
-                existing = {a.name: a.attr for a in mlir.ir.DictAttr(call.attributes["mhlo.frontend_attributes"])} \
-                    if "mhlo.frontend_attributes" in call.attributes else {}
-                tags = {k: mlir.ir.StringAttr.get(v) for k, v in TAGS.items()}
-                call.attributes["mhlo.frontend_attributes"] = mlir.ir.DictAttr.get(existing | tags)
-    except Exception:  # noqa: BLE001 -- an unexpected IR (another JAX): the loop runs untagged, as before
-        pass
+        call = _call_to_tag(ctx, values)
+    except Exception:  # noqa: BLE001 -- an IR this code does not know (another JAX): untagged, as before
+        call = None
+    if call is not None:
+        attributes = call.attributes
+        existing = ({a.name: a.attr for a in mlir.ir.DictAttr(attributes["mhlo.frontend_attributes"])}
+                    if "mhlo.frontend_attributes" in attributes else {})
+        tags = {k: mlir.ir.StringAttr.get(v) for k, v in TAGS.items()}
+        attributes["mhlo.frontend_attributes"] = mlir.ir.DictAttr.get(existing | tags)
     return values
 
 
