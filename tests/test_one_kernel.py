@@ -55,20 +55,29 @@ def test_the_limit_counts_the_state_as_lowered_vmapped_batches_included(limit):
     small, x_small = free_run("strang", 128)
     large, x_large = free_run("strang", 256)
     assert OURS in program(small, x_small) and OURS not in program(large, x_large)
-    one, _ = free_run("strang", 1)
-    batched = jax.vmap(lambda x: one(x[None])[0])
-    assert OURS in program(batched, x_small[:128]) and OURS not in program(batched, x_large)
+    group, x_group = free_run("strang", 64)  # 1.5 KiB a group: vmapped over 2 groups, 3 KiB; over 16, 24 KiB
+    batched = jax.vmap(group)
+    assert OURS in program(batched, jnp.stack([x_group] * 2)) and OURS not in program(batched, jnp.stack([x_group] * 16))
+
+
+def test_a_loop_under_the_floor_stays_a_plain_loop():
+    """One body: XLA's own small-loop pass makes it one kernel; no call of ours around it."""
+    assert _one_kernel.ONE_KERNEL_FROM_BYTES > 24
+    run, x0 = free_run("blanes-casas-murua-8", 1)
+    text = program(run, x0)
+    assert OURS not in text and "xla_cpu_small_call" in text
 
 
 def shear_flows(write):
-    """Two exact shears of (q, p), written with ``write(x, k, value)``."""
+    """Two exact shears of (q, p) (each of shape (128,): 2 KiB a state, above the floor),
+    written with ``write(x, k, value)``."""
     return [lambda x, t: write(x, 0, x[0] + t * x[1]), lambda x, t: write(x, 1, x[1] - t * x[0])]
 
 
 WRITES = {
     "stack (tagged)": lambda x, k, v: jnp.stack([v if i == k else x[i] for i in range(2)]),
     "scatter": lambda x, k, v: x.at[k].set(v),
-    "dot": lambda x, k, v: x + (v - x[k]) * (jnp.eye(2, dtype=x.dtype) @ (jnp.arange(2) == k).astype(x.dtype)),
+    "dot": lambda x, k, v: x + jnp.eye(2, dtype=x.dtype)[:, k:k + 1] @ (v - x[k])[None],
     "sort": lambda x, k, v: jnp.stack([v if i == k else x[i] for i in range(2)]) + 0 * jnp.sort(x)[0],
     "custom call (solve)": lambda x, k, v: jnp.linalg.solve(jnp.eye(2, dtype=x.dtype),
                                                              jnp.stack([v if i == k else x[i] for i in range(2)])),
@@ -78,7 +87,7 @@ WRITES = {
 @pytest.mark.parametrize("kind", list(WRITES))
 def test_a_loop_with_an_operation_the_kernel_emitter_refuses_runs_untagged_and_right(kind):
     step = jaxsplit.compose(shear_flows(WRITES[kind]), "strang")
-    x0, h, n = jnp.array([1.0, 0.0]), 0.01, 400
+    x0, h, n = jnp.array([[1.0] * 128, [0.0] * 128]), 0.01, 400
 
     def run(x):
         return jaxsplit.integrate(step, x, h, n).final
@@ -89,7 +98,7 @@ def test_a_loop_with_an_operation_the_kernel_emitter_refuses_runs_untagged_and_r
         expected[0] += h / 2 * expected[1]
         expected[1] -= h * expected[0]
         expected[0] += h / 2 * expected[1]
-    np.testing.assert_allclose(np.asarray(jax.jit(run)(x0)), expected, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(np.asarray(jax.jit(run)(x0)), np.repeat(expected[:, None], 128, 1), rtol=0, atol=1e-13)
 
 
 def test_other_backends_never_get_the_tag():

@@ -56,7 +56,9 @@ def threaded(body, carry, invariants, n):
 
     if isinstance(n, int):
         return one_kernel(lambda c: jax.lax.scan(lambda c, _: (through(c), None), c, length=n)[0][0], (carry, arrays))
-    return one_kernel(lambda c, n: jax.lax.fori_loop(0, n, lambda _, c: through(c), c)[0], (carry, arrays), n)
+    # n closed over, not passed: a concrete n stays concrete (fori_loop then runs a scan, whose
+    # state carries no bound unchanged: see the module docstring)
+    return one_kernel(lambda c: jax.lax.fori_loop(0, n, lambda _, c: through(c), c)[0], (carry, arrays))
 
 
 def repeated(body, carry, invariants, n: int, remat=lambda f: f):

@@ -26,6 +26,12 @@ The tag is decided when the program is lowered for the CPU, where the shapes are
   runs untagged);
 * never on another backend (a GPU compiles the loop as before).
 
+A loop whose arguments (as traced: per state under a ``vmap`` of your own) are under
+``ONE_KERNEL_FROM_BYTES`` (one body, one top, a few dozen bodies) is left as it was: XLA's
+own pass already makes it one kernel, and under differentiation the nested call cost one
+body's reversible gradient 5 % (JAX's partial evaluation moved the select's constant
+component tests out of the forward loop, as data).
+
 ``ONE_KERNEL_BYTES = -1`` turns the tag off (read at lowering: new programs only).
 Untagged, the loop is the same nested ``jit``, inlined by XLA: the program it was before.
 """
@@ -35,6 +41,7 @@ import numpy as np
 from jax.interpreters import ad, batching, mlir
 
 ONE_KERNEL_BYTES = 64 * 2**10
+ONE_KERNEL_FROM_BYTES = 2**10
 TAGS = {"xla_cpu_small_call": "true", "inlineable": "false"}
 
 # stablehlo operations the one-kernel emitter cannot compile (XLA's small-while-loop pass
@@ -49,7 +56,10 @@ _DIALECTS = ("stablehlo.", "chlo.", "func.")
 
 def one_kernel(loop, *args):
     """``loop(*args)`` (a ``lax.scan`` or ``fori_loop`` of a step) as one call, tagged on the
-    CPU to compile into one kernel where that is faster (see the module docstring)."""
+    CPU to compile into one kernel where that is faster (see the module docstring); called
+    directly below ``ONE_KERNEL_FROM_BYTES`` of arguments as traced."""
+    if _state_bytes(jax.tree_util.tree_leaves(args)) < ONE_KERNEL_FROM_BYTES:
+        return loop(*args)
     out = jax.jit(loop)(*args)
     leaves, tree = jax.tree_util.tree_flatten(out)
     return jax.tree_util.tree_unflatten(tree, _one_kernel_p.bind(*leaves))
