@@ -11,7 +11,9 @@ steps 2.2× faster, one body with Kahan–Li 8 1.6× faster; 3.1× and 1.2× in 
 operation has enough work to hide its dispatch: one kernel ran no faster and compiled up to
 a third longer, and on 10⁵ bodies it loses XLA's multi-threading. Hence the bound below:
 64 KiB per iteration, one body or a top with any scheme, up to ~50 bodies with an
-eighth-order one.
+eighth-order one. Above it jaxsplit's own stepping loop is still one kernel, per program
+(``core._one_kernel``: up to 64 KiB of state, where a few hundred bodies gain 1.2×), which
+leaves other programs (diffrax's) as XLA compiles them.
 
 ``import jaxsplit`` raises the option to ``SMALL_LOOP_BYTES`` through ``XLA_FLAGS`` (inside
 ``--xla_backend_extra_options``, which XLA reads once, when JAX starts its backend) unless

@@ -13,6 +13,9 @@ So the select form is used only where that cannot happen: in the body of ``threa
 carries the values the body needs (the invariants) through an optimization barrier together
 with the state, so nothing in the loop's state is unchanged. Everywhere else (a user's own
 ``scan``, diffrax's loop, a differentiated run) rotations use the ``stack`` form.
+
+``threaded`` also runs its loop through ``one_kernel``: a call XLA compiles as one CPU kernel
+where that is faster (``_one_kernel``).
 """
 
 import contextlib
