@@ -59,8 +59,8 @@ def threaded(body, carry, invariants, n):
 
     if isinstance(n, int):
         return one_kernel(lambda c: jax.lax.scan(lambda c, _: (through(c), None), c, length=n)[0][0], (carry, arrays))
-    # n closed over, not passed: a concrete n stays concrete (fori_loop then runs a scan, whose
-    # state carries no bound unchanged: see the module docstring)
+    # n closed over, not passed: a concrete n stays concrete (a fori_loop over concrete bounds
+    # is a scan); passed in, it was a traced bound and one body's reversible gradient 6 % slower
     return one_kernel(lambda c: jax.lax.fori_loop(0, n, lambda _, c: through(c), c)[0], (carry, arrays))
 
 

@@ -11,8 +11,8 @@ the process speeds diffrax's loops more than ours (its steps are more kernels).
 So ``one_kernel`` makes the call itself, tagged as that pass would tag it (and
 ``inlineable="false"``, which keeps XLA's call inliner off it), for this loop alone. Free
 bodies, Casimir split (``benchmarks/results/one_kernel.md``): Kahan–Li 8 and
-Blanes–Casas–Murua 8 1.2–1.3× faster at 256 bodies, 1.7× at 64 (Kahan–Li 8, whose loop is
-above XLA's threshold there), 1.03–1.07× at 1024–2048, bit-identical; 256 heavy tops 1.13×,
+Blanes–Casas–Murua 8 1.2× faster at 256 bodies, 1.75× at 64 (Kahan–Li 8, whose loop is
+above XLA's threshold there), 1.03–1.07× at 1024–2048, bit-identical; 256 heavy tops 1.12×,
 7e-13 apart after 2,000 steps (XLA fuses the uninlined loop otherwise: another rounding).
 The tag is decided when the program is lowered for the CPU, where the shapes are final
 (a ``vmap`` has added its axis):
@@ -40,6 +40,11 @@ import jax
 import numpy as np
 from jax.interpreters import ad, batching, mlir
 
+try:
+    from jax.extend.core import Primitive
+except ImportError:  # JAX before jax.extend.core
+    from jax.core import Primitive
+
 ONE_KERNEL_BYTES = 64 * 2**10
 ONE_KERNEL_FROM_BYTES = 2**10
 TAGS = {"xla_cpu_small_call": "true", "inlineable": "false"}
@@ -65,7 +70,7 @@ def one_kernel(loop, *args):
     return jax.tree_util.tree_unflatten(tree, _one_kernel_p.bind(*leaves))
 
 
-_one_kernel_p = jax.extend.core.Primitive("jaxsplit_one_kernel")
+_one_kernel_p = Primitive("jaxsplit_one_kernel")
 _one_kernel_p.multiple_results = True
 _one_kernel_p.def_impl(lambda *xs: xs)
 _one_kernel_p.def_abstract_eval(lambda *avals: avals)
