@@ -33,6 +33,7 @@ import jax.numpy as jnp
 from ._compose import Composition
 from ._errors import InputError
 from ._flows import join_parameters, split_parameters
+from ._one_kernel import plain_loops
 
 ADJOINTS = ("store", "checkpoint", "reversible")
 
@@ -90,7 +91,8 @@ def _reversible(static, parameters, x, h, n):
 
 
 def _reversible_fwd(static, parameters, x, h, n):
-    y = _reversible(static, parameters, x, h, n)
+    with plain_loops():  # under differentiation a nested loop call costs (``_one_kernel``)
+        y = _reversible(static, parameters, x, h, n)
     return y, (parameters, y, h, n)
 
 
