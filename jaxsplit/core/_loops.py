@@ -11,7 +11,8 @@ Blanes–Casas–Murua 8: 22.7 ms instead of 17.2, slower than the ``stack`` for
 
 So the select form is used only where that cannot happen: in the body of ``threaded``, which
 carries the values the body needs (the invariants) through an optimization barrier together
-with the state, so nothing in the loop's state is unchanged. Everywhere else (a user's own
+with the state, and for a traced count its bound as well (a ``fori_loop`` carries it unchanged:
+output at given times ran 19× slower), so nothing in the loop's state is unchanged. Everywhere else (a user's own
 ``scan``, diffrax's loop, a differentiated run) rotations use the ``stack`` form.
 
 ``threaded`` also runs its loop through ``one_kernel``: a call XLA compiles as one CPU kernel
@@ -24,6 +25,7 @@ import functools
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
 
 from ._one_kernel import one_kernel
 
@@ -59,9 +61,22 @@ def threaded(body, carry, invariants, n):
 
     if isinstance(n, int):
         return one_kernel(lambda c: jax.lax.scan(lambda c, _: (through(c), None), c, length=n)[0][0], (carry, arrays))
-    # n closed over, not passed: a concrete n stays concrete (a fori_loop over concrete bounds
-    # is a scan); passed in, it was a traced bound and one body's reversible gradient 6 % slower
-    return one_kernel(lambda c: jax.lax.fori_loop(0, n, lambda _, c: through(c), c)[0], (carry, arrays))
+    # a traced count: a while loop whose bound goes through the barrier too (a fori_loop carries
+    # it unchanged, and XLA then hoisted the select's tests: ts= runs 2.7x slower). Closed over,
+    # not passed: a concrete n stays concrete (passed in, one body's reversible gradient 6 % slower)
+    def counted(c):
+        def again(k_c_bound):
+            return k_c_bound[0] < k_c_bound[2]
+
+        def one(k_c_bound):
+            k, c, bound = k_c_bound
+            c, bound = jax.lax.optimization_barrier((through(c), bound))
+            return k + 1, c, bound
+
+        bound = jnp.asarray(n)
+        return jax.lax.while_loop(again, one, (jnp.zeros((), bound.dtype), c, bound))[1][0]
+
+    return one_kernel(counted, (carry, arrays))
 
 
 def repeated(body, carry, invariants, n: int, remat=lambda f: f):
