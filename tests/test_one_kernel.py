@@ -21,18 +21,23 @@ def states(b):
 
 @pytest.fixture
 def limit():
-    """Set ``ONE_KERNEL_BYTES`` for the test (caches cleared: programs are lowered anew)."""
+    """Set ``ONE_KERNEL_BYTES`` for the test (read when a program is lowered: ``compiled``)."""
     def set_limit(value):
         _one_kernel.ONE_KERNEL_BYTES = value
-        jax.clear_caches()
 
     default = _one_kernel.ONE_KERNEL_BYTES
     yield set_limit
     set_limit(default)
 
 
+def compiled(fn):
+    """``fn`` jitted as a new function: traced, lowered and compiled anew (no cached program
+    from another limit; clearing JAX's caches instead cost the worker's other tests theirs)."""
+    return jax.jit(lambda *args: fn(*args))
+
+
 def program(fn, *args):
-    return jax.jit(fn).lower(*args).compile().as_text()
+    return compiled(fn).lower(*args).compile().as_text()
 
 
 def free_run(scheme, b, n=300, h=0.3):
@@ -48,10 +53,10 @@ def test_a_batch_under_the_limit_runs_tagged_and_equal_to_the_untagged_loop(limi
     text = program(run, x0)
     assert OURS in text
     assert not any("pred[" in state for state in re.findall(r"= \(([^)]*)\) while\(", text))  # tests kept inside
-    tagged = jax.jit(run)(x0)
+    tagged = compiled(run)(x0)
     limit(-1)
     assert OURS not in program(run, x0)
-    np.testing.assert_array_equal(np.asarray(jax.jit(run)(x0)), np.asarray(tagged))  # measured bit-identical
+    np.testing.assert_array_equal(np.asarray(compiled(run)(x0)), np.asarray(tagged))  # measured bit-identical
 
 
 def test_the_limit_counts_the_state_as_lowered_vmapped_batches_included(limit):
@@ -119,9 +124,9 @@ def test_the_reversible_gradient_runs_its_backward_pass_tagged_and_matches_the_u
 
     inertia = jnp.asarray(jaxsplit.STANDARD_CASE.inertia)
     assert OURS in program(jax.grad(loss), inertia)
-    tagged = jax.jit(jax.grad(loss))(inertia)
+    tagged = compiled(jax.grad(loss))(inertia)
     limit(-1)
-    np.testing.assert_allclose(np.asarray(jax.jit(jax.grad(loss))(inertia)), np.asarray(tagged), rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(compiled(jax.grad(loss))(inertia)), np.asarray(tagged), rtol=1e-12)
 
 
 def kahan_li_6(inertia):

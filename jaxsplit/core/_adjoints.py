@@ -33,7 +33,7 @@ import jax.numpy as jnp
 from ._compose import Composition
 from ._errors import InputError
 from ._flows import join_parameters, split_parameters
-from ._one_kernel import plain_loops
+from ._loops import plain_loops
 
 ADJOINTS = ("store", "checkpoint", "reversible")
 

@@ -30,6 +30,16 @@ import jax.numpy as jnp
 from ._one_kernel import one_kernel
 
 _SELECTS = contextvars.ContextVar("jaxsplit_selects", default=False)
+_PLAIN = contextvars.ContextVar("jaxsplit_plain_loops", default=False)
+
+
+@contextlib.contextmanager
+def _switched_on(flag):
+    token = flag.set(True)
+    try:
+        yield
+    finally:
+        flag.reset(token)
 
 
 def selects() -> bool:
@@ -37,32 +47,29 @@ def selects() -> bool:
     return _SELECTS.get()
 
 
-@contextlib.contextmanager
-def _selecting():
-    token = _SELECTS.set(True)
-    try:
-        yield
-    finally:
-        _SELECTS.reset(token)
+def plain_loops():
+    """Loops ``threaded`` traces inside run as plain loops, not through ``one_kernel``."""
+    return _switched_on(_PLAIN)
 
 
 def threaded(body, carry, invariants, n):
     """``n`` times ``carry = body(carry, invariants)``: a ``lax.scan`` (Python int ``n``) or a
-    ``fori_loop`` (traced ``n``), the array leaves of ``invariants`` carried through an
-    optimization barrier with ``carry`` (the module docstring says why), the body traced
-    with the select form on."""
+    ``while_loop`` (traced ``n``), the array leaves of ``invariants`` (and a traced bound)
+    carried through an optimization barrier with ``carry`` (the module docstring says why),
+    the body traced with the select form on; through ``one_kernel`` unless ``plain_loops``."""
     arrays, rest = eqx.partition(invariants, eqx.is_array)
 
     def through(c):
         state, inv = c
-        with _selecting():
+        with _switched_on(_SELECTS):
             state = body(state, eqx.combine(inv, rest))
         return jax.lax.optimization_barrier((state, inv))
 
+    run = (lambda loop, *args: loop(*args)) if _PLAIN.get() else one_kernel
     if isinstance(n, int):
-        return one_kernel(lambda c: jax.lax.scan(lambda c, _: (through(c), None), c, length=n)[0][0], (carry, arrays))
+        return run(lambda c: jax.lax.scan(lambda c, _: (through(c), None), c, length=n)[0][0], (carry, arrays))
     # a traced count: a while loop whose bound goes through the barrier too (a fori_loop carries
-    # it unchanged, and XLA then hoisted the select's tests: ts= runs 2.7x slower). Closed over,
+    # it unchanged, and XLA then hoisted the select's tests: ts= runs 7x slower). Closed over,
     # not passed: a concrete n stays concrete (passed in, one body's reversible gradient 6 % slower)
     def counted(c):
         def again(k_c_bound):
@@ -76,7 +83,7 @@ def threaded(body, carry, invariants, n):
         bound = jnp.asarray(n)
         return jax.lax.while_loop(again, one, (jnp.zeros((), bound.dtype), c, bound))[1][0]
 
-    return one_kernel(counted, (carry, arrays))
+    return run(counted, (carry, arrays))
 
 
 def repeated(body, carry, invariants, n: int, remat=lambda f: f):

@@ -35,14 +35,11 @@ component tests out of the forward loop, as data).
 The same partial evaluation makes a nested forward loop under differentiation much slower
 (the reversible adjoint's forward pass, Kahan–Li 8 on 256 bodies: a gradient 4× slower,
 1.2 s against 0.31 s, every select test moved out as loop state), so that pass traces its
-loop inside ``plain_loops``; its backward pass keeps the call (as fast as the plain loop).
+loop inside ``_loops.plain_loops``; its backward pass keeps the call (as fast as the plain loop).
 
 ``ONE_KERNEL_BYTES = -1`` turns the tag off (read at lowering: new programs only).
 Untagged, the loop is the same nested ``jit``, inlined by XLA: the program it was before.
 """
-
-import contextlib
-import contextvars
 
 import jax
 import numpy as np
@@ -67,24 +64,11 @@ _REFUSED = ("custom_call", "scatter", "sort", "fft", "infeed", "outfeed", "parti
 _DIALECTS = ("stablehlo.", "chlo.", "func.")
 
 
-_PLAIN = contextvars.ContextVar("jaxsplit_plain_loops", default=False)
-
-
-@contextlib.contextmanager
-def plain_loops():
-    """Loops traced inside run as plain loops (no call of ``one_kernel``'s)."""
-    token = _PLAIN.set(True)
-    try:
-        yield
-    finally:
-        _PLAIN.reset(token)
-
-
 def one_kernel(loop, *args):
     """``loop(*args)`` (a ``lax.scan`` or ``fori_loop`` of a step) as one call, tagged on the
     CPU to compile into one kernel where that is faster (see the module docstring); called
-    directly below ``ONE_KERNEL_FROM_BYTES`` of arguments as traced, or inside ``plain_loops``."""
-    if _PLAIN.get() or _state_bytes(jax.tree_util.tree_leaves(args)) < ONE_KERNEL_FROM_BYTES:
+    directly below ``ONE_KERNEL_FROM_BYTES`` of arguments as traced."""
+    if _state_bytes(jax.tree_util.tree_leaves(args)) < ONE_KERNEL_FROM_BYTES:
         return loop(*args)
     out = jax.jit(loop)(*args)
     leaves, tree = jax.tree_util.tree_flatten(out)
