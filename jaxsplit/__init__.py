@@ -26,7 +26,7 @@ from pathlib import Path
 if typing.TYPE_CHECKING:
     from . import systems as systems
     from ._xla_cpu import compiler_options as compiler_options
-    from ._xla_cpu import small_loop_setting as small_loop_setting
+    from ._xla_cpu import tune_cpu as tune_cpu
     from .checks._invariants import InvariantErrors as InvariantErrors
     from .checks._invariants import invariant_errors as invariant_errors
     from .checks._invariants import monitor_invariants as monitor_invariants
@@ -157,12 +157,6 @@ def __getattr__(name: str):
 def __dir__():
     return sorted({*globals(), *_public()})
 
-
-# Before JAX starts its backend: XLA compiles small loops (one body, a top, a few bodies) as one kernel
-# (``_xla_cpu``; a millisecond, no JAX import).
-from ._xla_cpu import small_loop_setting
-
-small_loop_setting()
 
 try:
     __version__ = version("jaxsplit")

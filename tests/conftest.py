@@ -15,8 +15,6 @@ os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {TEST_XLA_FLAGS}".
 import jax  # after XLA_FLAGS: the backend reads them when it starts
 import pytest
 
-import jaxsplit  # noqa: F401  (before any backend starts: its small-loop setting, ``jaxsplit._xla_cpu``)
-
 jax.config.update("jax_enable_x64", True)
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent

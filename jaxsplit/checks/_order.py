@@ -10,14 +10,13 @@ optionally, step sizes below ``max_step`` (for compositions with large weights t
 asymptotic regime is set by the largest sub-step |w| h, not by the error).
 """
 
+import functools
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._xla_cpu import jit
-from ..core._compose import Composition
 from ..core._errors import InputError
 from ..core._flows import join_parameters, split_parameters
 from ..core._integrate import integrate
@@ -89,8 +88,6 @@ def global_errors(step, x0, t_end: float, counts, reference):
         raise InputError(f"step counts must be >= 1, got {counts.tolist()}")
     x0 = as_state(x0)
     hs = jnp.asarray(t_end / counts, dtype=float_dtype(x0))
-    if isinstance(step, Composition):
-        step = step.for_run(x0, float(np.max(np.abs(np.asarray(hs)))))  # the kernel for the largest step
     parameters, static = split_parameters(step)
     runs = [_saved_run(parameters, static, x0, h, int(counts[-1])) for h in hs]
     finals = jax.tree_util.tree_map(lambda *a: jnp.stack([r[n] for r, n in zip(a, counts)]), *runs)
@@ -101,11 +98,10 @@ def global_errors(step, x0, t_end: float, counts, reference):
     return np.asarray(hs), np.asarray(errors)
 
 
-@jit(static_argnames=("static", "n_steps"))
+@functools.partial(jax.jit, static_argnames=("static", "n_steps"))
 def _saved_run(parameters, static, x0, h, n_steps: int):
-    """Every state of ``n_steps`` steps; ``h`` is traced here, so the step keeps the kernel it was
-    given (the largest step's) and one compilation serves the ladder, and any other ladder of
-    the same scheme, kernel and length (body and state are traced too)."""
+    """Every state of ``n_steps`` steps; ``h`` is traced here, so one compilation serves the
+    ladder, and any other ladder of the same scheme and length (body and state are traced too)."""
     return integrate(join_parameters(parameters, static), x0, h, n_steps, save_every=1).x
 
 

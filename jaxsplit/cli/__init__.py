@@ -82,6 +82,9 @@ def main(argv=None) -> int:
     arguments: then ``main`` is the process, and signals arriving after it returns are
     ignored so that they cannot change the exit status it decided)."""
     with _signals.policy(owns_process=argv is None) as stop:
+        from .._xla_cpu import tune_cpu
+
+        tune_cpu()  # the command line's own runs: 512-bit vectors (before JAX starts its backend)
         import jax
 
         jax.config.update("jax_enable_x64", True)

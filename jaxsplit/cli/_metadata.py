@@ -49,7 +49,6 @@ def run_metadata(command: str, argv=None) -> dict:
     import jax
 
     from .. import __version__
-    from .._xla_cpu import compiler_options
 
     return {
         "command": command,
@@ -60,6 +59,5 @@ def run_metadata(command: str, argv=None) -> dict:
         "python_version": platform.python_version(),
         "dtype": "float64",
         "xla_flags": os.environ.get("XLA_FLAGS", ""),  # results are bit-reproducible per flag set
-        "compiler_options": compiler_options(),  # jaxsplit's own, per program (bit-identical in its benchmark)
         "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
     }

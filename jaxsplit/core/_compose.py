@@ -9,7 +9,6 @@ boundary as well (first-same-as-last); ``Composition.advance`` does that inside 
 of a given word length shares one compilation.
 """
 
-import dataclasses
 import functools
 from collections.abc import Sequence
 
@@ -21,7 +20,6 @@ import numpy as np
 from ._errors import InputError
 from ._flows import AbstractFlow, as_flow, split_parameters, sum_to_shape
 from ._loops import repeated, threaded
-from ._memo import derived
 from ._schemes import Scheme, schemes
 from ._state import float_dtype
 
@@ -30,10 +28,9 @@ Word = tuple[tuple[int, float], ...]
 
 class _Whole(tuple):
     """A word stored whole: a tuple that JAX's tree functions see as one leaf. Equinox checks
-    every leaf of a module's static fields whenever one is built, and ``integrate`` builds a
-    composition on every call (``for_run``): Blanes–Casas–Murua 8's word and processor are
-    ~250 (piece, weight) leaves, 342 µs a build, 56 µs kept whole. Equal to, hashed and
-    printed as the plain tuple."""
+    every leaf of a module's static fields whenever one is built or flattened (every jit
+    call): Blanes–Casas–Murua 8's word and processor are ~250 (piece, weight) leaves, 342 µs
+    a build, 56 µs kept whole. Equal to, hashed and printed as the plain tuple."""
 
     __slots__ = ()
 
@@ -104,7 +101,7 @@ def _apply(flows, w: Word, state, h):
         # The barrier keeps XLA from fusing a whole step into one kernel that recomputes
         # earlier sub-flows: without it the cost grows geometrically with the word length
         # (Kahan-Li 6 on the axes split: minutes per step), with it ~20 ns per rotation.
-        state = jax.lax.optimization_barrier(flows[piece].for_weight(weight)(state, weight * h))
+        state = jax.lax.optimization_barrier(flows[piece](state, weight * h))
     return state
 
 
@@ -167,28 +164,6 @@ def _joint_layout(state, cotangent):
     return pack, unpack
 
 
-def _components_first(state):
-    return jnp.moveaxis(state, -1, 0)
-
-
-def _components_last(state):
-    return jnp.moveaxis(state, 0, -1)
-
-
-# Derived from a composition's static fields only, and asked for by every flow's ``for_run``
-# at every ``integrate`` call: cached (by the word, and per object: hashing a long word took
-# 5 µs a call), and reached by functions rather than methods (equinox builds a module for
-# every bound method looked up, 20 µs; Blanes–Casas–Murua 8: 67 µs per ``entries()`` uncached).
-def entries_of(composition) -> Word:
-    """``Composition.entries``."""
-    return derived(composition, "entries", lambda: _entries(composition.word, composition._parts, composition.fsal))
-
-
-def reach_of(composition) -> tuple[float, ...]:
-    """``Composition.reach``."""
-    return derived(composition, "reach", lambda: _reach(entries_of(composition), len(composition.flows)))
-
-
 @functools.cache
 def _sequences(parts, fsal: bool):
     pre, kernel, post = parts
@@ -229,10 +204,9 @@ class Composition(AbstractFlow):
     Traced: the flows are its PyTree children, so their array fields (inertia, rates) are
     traced wherever the step goes (``jit``, ``vmap``, ``grad``), and so are ``state`` and
     ``h``. Static: ``word`` (the merged (piece, weight) sequence), ``scheme`` and ``fsal``
-    (first-same-as-last merging across steps in ``advance``) and ``structure_of_arrays``.
-    ``for_run`` returns the same map made fastest for one run (each flow's kernel; for a
-    batch, the layout: the components moved first inside the step where that is faster,
-    ``structure_of_arrays``, see ``so3.COMPONENTS_FIRST_UP_TO``; invisible from outside).
+    (first-same-as-last merging across steps in ``advance``). The program is the same for
+    every value of the traced parts and under every transformation: nothing is chosen from
+    values seen at a call.
 
     >>> import jax.numpy as jnp, jaxsplit
     >>> step = jaxsplit.splitting(jaxsplit.RigidBody([2.0, 1.0, 0.5]), "strang", "casimir", shift=1)
@@ -247,12 +221,11 @@ class Composition(AbstractFlow):
     word: Word = eqx.field(static=True, converter=_whole)
     scheme: Scheme | None = eqx.field(static=True, default=None)
     fsal: bool = eqx.field(static=True, default=False)
-    structure_of_arrays: bool = eqx.field(static=True, default=False)
     processing: tuple[Word, Word, Word] | None = eqx.field(static=True, default=None,  # (P, K, P⁻¹)
                                                           converter=_whole_parts)
 
     def __call__(self, state, h):
-        return self._in_layout(lambda x: self._step(x, _like_state(h, x)), state)
+        return self._step(state, _like_state(h, state))
 
     def _step(self, state, h):
         """One step: P, K and P⁻¹ (``_parts``; a processed scheme's processor rolled,
@@ -271,11 +244,6 @@ class Composition(AbstractFlow):
         """The sub-flows repeated by a run: the word, or a processed scheme's kernel K."""
         return self._parts[1]
 
-    def _in_layout(self, run, state):
-        if not self.structure_of_arrays:
-            return run(state)
-        return _components_last(run(_components_first(state)))
-
     @property
     def is_group(self) -> bool:
         return False
@@ -283,45 +251,11 @@ class Composition(AbstractFlow):
     def entries(self) -> Word:
         """Every (piece, weight) sub-flow a call or a run may evaluate (sub-steps are weight·h),
         merges across steps included."""
-        return entries_of(self)
+        return _entries(self.word, self._parts, self.fsal)
 
     def reach(self) -> tuple[float, ...]:
         """The largest |weight| each piece is called with."""
-        return reach_of(self)
-
-    def for_run(self, x0, h, step=None) -> "Composition":
-        """The same map made fastest for a run from ``x0`` with steps |h'| <= |h| (and states
-        no larger than ``x0``): every flow's ``for_run`` (e.g. a rotation kernel valid for the
-        angles such a run can reach). ``integrate`` calls it with concrete values; call it
-        yourself before your own ``jit`` (with the largest state and step of your runs).
-        As a piece of another composition (``step`` given) it stays general: the other
-        pieces may change what bounds its flows."""
-        if step is not None or any(isinstance(v, jax.core.Tracer) for v in jax.tree_util.tree_leaves((x0, h))):
-            return self
-        size = abs(float(np.asarray(h)))
-        # through the class: a bound method of an equinox module is a module built per lookup (20 µs)
-        flows = tuple(type(f).for_run(f, x0, w * size, self) for f, w in zip(self.flows, reach_of(self)))
-        firsts = {f.components_first for f in flows}
-        if len(firsts) > 1:  # all or none: the layout is the composition's
-            flows = tuple(dataclasses.replace(f, components_first=False) if f.components_first else f
-                          for f in flows)
-        soa = firsts == {True}
-        if soa == self.structure_of_arrays and all(f is g for f, g in zip(flows, self.flows)):
-            return self
-        # keyed by the prepared flows themselves: the remembered composition holds them, so their ids stay theirs
-        return derived(self, (tuple(map(id, flows)), soa),
-                       lambda: Composition(flows, self.word, self.scheme, self.fsal, soa, self.processing))
-
-    @property
-    def kernels(self) -> tuple[str, ...]:
-        """Each flow's trigonometry kernel ("general" for flows without a choice)."""
-        return tuple(getattr(f, "kernel", "general") for f in self.flows)
-
-    @property
-    def kernel(self) -> str:
-        """"polynomial" (every flow), "general" (none) or "mixed": what ``for_run`` chose."""
-        kinds = set(self.kernels)
-        return kinds.pop() if len(kinds) == 1 else "mixed"
+        return _reach(self.entries(), len(self.flows))
 
     @property
     def is_reversible(self) -> bool:
@@ -348,8 +282,6 @@ class Composition(AbstractFlow):
         ct_parameters in ``split_parameters`` order, ct_h); memory independent of n. Needs
         reversible flows (φ_{−t} = φ_t⁻¹), not a symmetric scheme: the word is inverted
         sub-flow by sub-flow."""
-        if self.structure_of_arrays:
-            x_after, ct_after = _components_first(x_after), _components_first(ct_after)
         h = _like_state(h, x_after)
         # one accumulator per flow, shaped as its step_back returns them (per state for a batch:
         # summed once at the end; a sum over the batch at every sub-flow cost 5 kernels a step)
@@ -360,8 +292,7 @@ class Composition(AbstractFlow):
 
         def back_one(piece, weight, joint, acc, flows=self.flows, h=h):  # one sub-flow undone, cotangents added
             x, ct = unpack(joint)
-            flow = flows[piece].for_weight(weight) if isinstance(weight, float) else flows[piece]  # as _apply
-            x, ct, dp, dt = flow.step_back(x, weight * h, ct)
+            x, ct, dp, dt = flows[piece].step_back(x, weight * h, ct)
             grown = jax.tree_util.tree_map(jnp.add, acc[piece], (dp, weight * dt))
             return pack(x, ct), acc[:piece] + (grown,) + acc[piece + 1:]
 
@@ -403,8 +334,6 @@ class Composition(AbstractFlow):
         else:
             carry = jax.lax.cond(n > 0, walk, lambda c: c, carry)
         (x, ct), acc = unpack(carry[0]), carry[1]
-        if self.structure_of_arrays:
-            x, ct = _components_last(x), _components_last(ct)
         ct_parameters = [None if entry is None else sum_to_shape(entry, jnp.shape(p))
                          for f, (dp, _) in zip(self.flows, acc) for entry, p in zip(dp, split_parameters(f)[0])]
         return x, ct, ct_parameters, sum(jnp.sum(dt) for _, dt in acc).astype(h.dtype)
@@ -414,9 +343,6 @@ class Composition(AbstractFlow):
 
         ``n`` is a Python int (a ``lax.scan``) or a traced integer (a ``fori_loop``).
         """
-        return self._in_layout(lambda x: self._advance(x, h, n), state)
-
-    def _advance(self, state, h, n):
         h = _like_state(h, state)
         static = isinstance(n, int)
         if static and n == 0:

@@ -81,26 +81,6 @@ class AbstractFlow(eqx.Module):
         """An exact one-parameter group (adjacent sub-flows may merge). Default: yes."""
         return True
 
-    def for_run(self, x0, t, step) -> "AbstractFlow":
-        """This flow made fastest for one run of ``step`` from ``x0`` in which it is called with
-        sub-steps |s| <= ``t`` (``Composition.for_run``; values may be traced: then keep the
-        general form). A flow may choose a kernel valid only for such runs (the rotations of
-        ``so3``). Default: itself."""
-        return self
-
-    def for_weight(self, weight: float) -> "AbstractFlow":
-        """This flow (as made by ``for_run``) for the sub-steps ``weight``·h of one entry of a
-        composition's word (``weight`` a Python float): a flow whose kernel depends on the size
-        of its sub-steps may take a cheaper one for a smaller weight (the rotations' polynomial,
-        truncated for the entry's own angle bound). Default: itself."""
-        return self
-
-    @property
-    def components_first(self) -> bool:
-        """Whether this flow expects an array state with its components on the first axis
-        (structure of arrays: set by ``for_run`` for batches). Default: no."""
-        return False
-
     @property
     def is_reversible(self) -> bool:
         """φ_{−t} = φ_t⁻¹ exactly (a group flow, a time-symmetric composition of such flows):

@@ -21,6 +21,7 @@ merges sub-flows across step boundaries. ``adjoint`` chooses what reverse mode s
 (``_adjoints``).
 """
 
+import functools
 import math
 from typing import Any
 
@@ -29,9 +30,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._xla_cpu import jit
 from ._adjoints import advance, advance_checkpointed, check_adjoint
-from ._compose import Composition
 from ._errors import InputError
 from ._flows import join_parameters, split_parameters
 from ._state import as_state, float_dtype
@@ -45,9 +44,7 @@ class Solution(eqx.Module):
     ``finite`` a bool scalar. ``final`` is the last saved state (the end of the run, or the
     last requested time); ``n_steps`` the full steps taken (static; ``None`` for ``ts=`` runs),
     ``scheme`` the scheme's name (static; ``None`` for a plain function), ``status`` is
-    ``"ok"`` / ``"nonfinite"`` (needs concrete values). ``kernel`` is the trigonometry the run's
-    rotations used (``Composition.for_run``: ``"polynomial"``, ``"general"`` or ``"mixed"``;
-    ``None`` for a plain function). Under ``vmap`` every array field gains
+    ``"ok"`` / ``"nonfinite"`` (needs concrete values). Under ``vmap`` every array field gains
     the batch axis. ``Trajectory`` is the former name.
 
     >>> import jax.numpy as jnp, jaxsplit
@@ -63,7 +60,6 @@ class Solution(eqx.Module):
     finite: jax.Array
     n_steps: int | None = eqx.field(static=True)
     scheme: str | None = eqx.field(static=True, default=None)
-    kernel: str | None = eqx.field(static=True, default=None)
 
     @property
     def final(self):
@@ -115,7 +111,7 @@ def _one(x):
     return jax.tree_util.tree_map(lambda a: a[None], x)
 
 
-@jit(static_argnames=("static", "n_steps", "save_every", "adjoint"))
+@functools.partial(jax.jit, static_argnames=("static", "n_steps", "save_every", "adjoint"))
 def _run(parameters, static, x0, h, t0, n_steps: int, save_every: int | None, adjoint: str):
     _TRACES[0] += 1  # runs only while tracing
     step = join_parameters(parameters, static)
@@ -140,10 +136,10 @@ def _run(parameters, static, x0, h, t0, n_steps: int, save_every: int | None, ad
             counts.append(n_steps)
         xs = _stack(*pieces)
     t = t0 + jnp.asarray(counts, dtype=dtype) * h
-    return Solution(t, xs, h, _finite(xs), n_steps, _scheme_name(step), getattr(step, "kernel", None))
+    return Solution(t, xs, h, _finite(xs), n_steps, _scheme_name(step))
 
 
-@jit(static_argnames=("static", "adjoint"))
+@functools.partial(jax.jit, static_argnames=("static", "adjoint"))
 def _run_at(parameters, static, x0, h, t0, ts, adjoint: str):
     """States at the times ``ts``: full grid steps, then a partial step from the grid state."""
     _TRACES[0] += 1
@@ -158,7 +154,7 @@ def _run_at(parameters, static, x0, h, t0, ts, adjoint: str):
         return (x, grid[i]), step(x, ts[i] - (t0 + grid[i] * h))
 
     _, xs = jax.lax.scan(output, (x0, jnp.zeros((), jnp.int32)), jnp.arange(ts.shape[0]))
-    return Solution(ts, xs, h, _finite(xs), None, _scheme_name(step), getattr(step, "kernel", None))
+    return Solution(ts, xs, h, _finite(xs), None, _scheme_name(step))
 
 
 def _scheme_name(step):
@@ -223,10 +219,10 @@ def integrate(step, x0, h, n_steps: int | None = None, *, save_every: int | None
     * ``ts=times`` (instead of ``n``): the states at the given times, each a partial step of
       the scheme from the last grid state t0 + k h before it (see the module docstring).
 
-    A ``Composition`` is first made fastest for this run (``Composition.for_run``: a
-    rotation kernel valid for the angles the run can reach, chosen from ``x0`` and ``h``
-    when they are concrete; under your own ``jit``/``vmap`` the general kernel, unless you
-    pass ``step.for_run(x0, h)``); ``Solution.kernel`` says which.
+    The compiled program does not depend on the values of ``x0``, ``h`` or the step's
+    parameters, nor on whether this call sits under your own ``jit``, ``vmap`` or ``grad``:
+    ``jax.jit(jax.vmap(lambda m: integrate(step, m, h, n).final))`` runs the same kernels as
+    ``integrate(step, batch, h, n)``.
     A negative ``h`` integrates backwards. ``t0`` is the initial time. ``adjoint`` is
     ``"store"``, ``"checkpoint"`` or ``"reversible"`` (see ``jaxsplit.core._adjoints``).
     Works under ``jit``, ``vmap`` and ``grad``; the computation follows the dtype of
@@ -250,8 +246,6 @@ def integrate(step, x0, h, n_steps: int | None = None, *, save_every: int | None
     h = step_size(h)
     if isinstance(t0, (str, bytes, bool)) or t0 is None:
         raise InputError(f"t0 must be a real number, got {t0!r}")
-    if isinstance(step, Composition):  # the fastest kernel and layout this run allows
-        step = Composition.for_run(step, x0, h)  # not step.for_run: equinox builds a bound method per lookup
     parameters, static = split_parameters(step)
     try:
         hash(static)

@@ -1,21 +1,21 @@
 """A stepping loop compiled into one CPU kernel, for jaxsplit's own programs only.
 
 XLA's CPU runtime runs a ``while`` loop as one dispatched kernel per fused operation per
-iteration, unless one iteration touches fewer bytes than a process-wide threshold
-(``_xla_cpu``): then a late pass wraps the loop in a ``call`` tagged ``xla_cpu_small_call``,
-compiled as one kernel. A composition step on a few hundred bodies (13 fused rotations a
-step for Blanes–Casas–Murua 8 at 256 bodies) is above any threshold that leaves other
-programs alone, and its dispatches were a quarter of its time. Raising the threshold for
-the process speeds diffrax's loops more than ours (its steps are more kernels).
+iteration, unless one iteration touches fewer bytes than a process-wide threshold (1 KiB
+by default): then a late pass wraps the loop in a ``call`` tagged ``xla_cpu_small_call``,
+compiled as one kernel. A composition step is dozens of small fused operations (13 fused
+rotations a step for Blanes–Casas–Murua 8 at 256 bodies), above that threshold from a
+single body with a long scheme up, and their dispatch was a quarter of the time at 256
+bodies and most of it for one body (``benchmarks/results/one_kernel.md``,
+``small_loops.md``). Raising the threshold for the process would change every other
+program (diffrax's loops too): a library must not.
 
 So ``one_kernel`` makes the call itself, tagged as that pass would tag it (and
-``inlineable="false"``, which keeps XLA's call inliner off it), for this loop alone. Free
-bodies, Casimir split (``benchmarks/results/one_kernel.md``): Kahan–Li 8 and
-Blanes–Casas–Murua 8 1.2× faster at 256 bodies, 1.75× at 64 (Kahan–Li 8, whose loop is
-above XLA's threshold there), 1.03–1.07× at 1024–2048, bit-identical; 256 heavy tops 1.12×,
-7e-13 apart after 2,000 steps (XLA fuses the uninlined loop otherwise: another rounding).
-The tag is decided when the program is lowered for the CPU, where the shapes are final
-(a ``vmap`` has added its axis):
+``inlineable="false"``, which keeps XLA's call inliner off it), for this loop alone. The tag
+is decided when the program is lowered for the CPU, where the shapes are final: a ``vmap``
+of the user's has added its axis, so a batch that arrives by ``vmap`` and one passed as a
+leading axis get the same decision (deciding at trace time saw one body under ``vmap`` and
+left 256 vmapped bodies untagged):
 
 * only while the loop's state is at most ``ONE_KERNEL_BYTES``: at 4096 bodies (96 KiB) it
   ties, at 16384 it loses 1.4–1.8×, as a single kernel is never split over threads;
@@ -26,19 +26,14 @@ The tag is decided when the program is lowered for the CPU, where the shapes are
   runs untagged);
 * never on another backend (a GPU compiles the loop as before).
 
-A loop whose arguments (as traced: per state under a ``vmap`` of your own) are under
-``ONE_KERNEL_FROM_BYTES`` (one body, one top, a few dozen bodies) is left as it was: XLA's
-own pass already makes it one kernel, and under differentiation the nested call cost one
-body's reversible gradient 5 % (JAX's partial evaluation moved the select's constant
-component tests out of the forward loop, as data).
-
-The same partial evaluation makes a nested forward loop under differentiation much slower
+Under differentiation JAX's partial evaluation makes a nested forward loop much slower
 (the reversible adjoint's forward pass, Kahan–Li 8 on 256 bodies: a gradient 4× slower,
 1.2 s against 0.31 s, every select test moved out as loop state), so that pass traces its
 loop inside ``_loops.plain_loops``; its backward pass keeps the call (as fast as the plain loop).
 
 ``ONE_KERNEL_BYTES = -1`` turns the tag off (read at lowering: new programs only).
 Untagged, the loop is the same nested ``jit``, inlined by XLA: the program it was before.
+``tests/test_one_kernel.py`` fails loudly if a JAX or XLA upgrade stops honouring the tag.
 """
 
 import jax
@@ -51,7 +46,6 @@ except ImportError:  # JAX before jax.extend.core
     from jax.core import Primitive
 
 ONE_KERNEL_BYTES = 64 * 2**10
-ONE_KERNEL_FROM_BYTES = 2**10
 TAGS = {"xla_cpu_small_call": "true", "inlineable": "false"}
 
 # stablehlo operations the one-kernel emitter cannot compile (XLA's small-while-loop pass
@@ -65,11 +59,8 @@ _DIALECTS = ("stablehlo.", "chlo.", "func.")
 
 
 def one_kernel(loop, *args):
-    """``loop(*args)`` (a ``lax.scan`` or ``fori_loop`` of a step) as one call, tagged on the
-    CPU to compile into one kernel where that is faster (see the module docstring); called
-    directly below ``ONE_KERNEL_FROM_BYTES`` of arguments as traced."""
-    if _state_bytes(jax.tree_util.tree_leaves(args)) < ONE_KERNEL_FROM_BYTES:
-        return loop(*args)
+    """``loop(*args)`` (a ``lax.scan`` or ``while_loop`` of a step) as one call, tagged on the
+    CPU to compile into one kernel where that is faster (see the module docstring)."""
     out = jax.jit(loop)(*args)
     leaves, tree = jax.tree_util.tree_flatten(out)
     return jax.tree_util.tree_unflatten(tree, _one_kernel_p.bind(*leaves))

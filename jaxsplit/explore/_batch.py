@@ -18,7 +18,6 @@ import numpy as np
 from jax.sharding import Mesh
 from jax.sharding import PartitionSpec as P
 
-from .._xla_cpu import jit
 from ..core._errors import InputError
 from ..core._state import as_state, float_dtype, leading_size, ravel
 from ..systems._base import AbstractSystem
@@ -130,7 +129,7 @@ def compiled(key, build_kernel, devices):
         if devices is not None and len(devices) > 1:
             mesh = Mesh(np.asarray(devices), ("cases",))
             fn = jax.shard_map(fn, mesh=mesh, in_specs=P("cases"), out_specs=P("cases"))
-        _COMPILED[full_key] = jit(fn)
+        _COMPILED[full_key] = jax.jit(fn)
     return _COMPILED[full_key]
 
 

@@ -1,9 +1,7 @@
 """``auto_splitting``: the scheme, split and step size that reach a tolerance at the least cost.
 
-Cost model (measured, ``benchmarks/kernel.py``): a run costs its rotations (n_steps times a
-step's, a processor's once), each weighted by the kernel the run gives it: the polynomial one
-where the angle bound allows the step size, truncated for the entry's own bound (cheaper the
-smaller: ``POLYNOMIAL_COST``), the general one, ``GENERAL_COST`` times dearer, beyond. Error model: for each
+Cost model: a run costs its sub-flows (n_steps times a step's, a processor's once); every
+rotation runs the same kernel whatever its angle (``so3.half_turn``). Error model: for each
 candidate (scheme, split) a pilot run over a short horizon T_p measures the global error
 e(h) against a tight reference at a ladder of step sizes (each step size run for its own
 count, h traced: one compilation per split and word length, rolled; the ladder stops at the
@@ -19,7 +17,6 @@ import inspect
 import math
 from typing import NamedTuple
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -32,12 +29,6 @@ from ..core._state import as_state, float_dtype, ravel
 from ._base import AbstractSystem
 
 CANDIDATES = ("strang", "blanes-moan-s6-prk", "kahan-li-6", "kahan-li-8", "blanes-casas-murua-8", "sofroniou-spaletta-10")
-# Time per rotation relative to the polynomial kernel truncated for |θ| <= 1 (benchmarks/results/kernel.md,
-# float64, one trajectory and a batch of 1e4 states laid out components-first): the general kernel, and
-# the polynomial one truncated for each smaller bound.
-GENERAL_COST = {"one state": 1.1, "batch": 12.0}
-POLYNOMIAL_COST = {"one state": {0.125: 0.7, 0.25: 0.8, 0.5: 0.85, 1.0: 1.0},
-                   "batch": {0.125: 0.65, 0.25: 0.79, 0.5: 0.85, 1.0: 1.0}}
 PILOT_ANGLES = 1.5 * 2.0 ** -np.arange(0, 7.5, 0.5)  # largest sub-step angle |c m| h of the pilot ladder (rad)
 PILOT_TIME = 20.0  # pilot horizon in units of the fastest rotation's period / 2π (1/rate)
 WINDOW = (1e3, 1e-3)  # asymptotic window: errors above 1e3 eps·|x| (round-off) and below 1e-3·|x|
@@ -62,7 +53,7 @@ class AutoSplitting(NamedTuple):
     split: str
     options: dict
     predicted_error: float  # modelled global error at t_end (max norm)
-    cost: float  # modelled cost: the run's rotations, each × its kernel's relative cost
+    cost: float  # modelled cost: the run's sub-flows
     candidates: tuple  # one dict per (scheme, split) considered: its h, error constant, cost
 
 
@@ -183,23 +174,8 @@ def _candidate(step, scheme, split, options, hs, errors, pilot_time, tol, t_end,
     h = h_max if constant == 0.0 else min(h_max, (tol / (constant * t_end)) ** (1.0 / p))
     n_steps = max(1, math.ceil(t_end / h))
     h = t_end / n_steps
-    fast = step.for_run(x0, h)
-    # a batch of bare m states, whichever layout for_run gave it (components last for long words)
-    layout = "batch" if eqx.is_array(x0) and jnp.ndim(x0) >= 2 else "one state"
-    head, body, tail = fast._sequences()  # the sub-flows of a run: body n_steps times, head and tail once
-    cost = n_steps * _cost(fast, body, layout) + _cost(fast, head + tail, layout)
+    head, body, tail = step._sequences()  # the sub-flows of a run: body n_steps times, head and tail once
+    cost = n_steps * len(body) + len(head + tail)
     return {"scheme": scheme.name, "split": split, "options": dict(options), "h": h, "n_steps": n_steps,
-            "error_constant": constant, "predicted_error": constant * h**p * t_end, "kernel": fast.kernel,
+            "error_constant": constant, "predicted_error": constant * h**p * t_end,
             "cost": float(cost), "step": step}
-
-
-def _cost(step, sub_flows, layout: str) -> float:
-    """The modelled cost of ``sub_flows`` (a word of ``step``): each rotation weighed by its own
-    kernel, the polynomial truncated for its entry's angle bound as the run evaluates it
-    (``for_weight``: at h = 0.5 most of Blanes–Casas–Murua 8's entries take the 1/8 bound)."""
-    total = 0.0
-    for piece, weight in sub_flows:
-        flow = step.flows[piece].for_weight(weight)
-        total += (POLYNOMIAL_COST[layout][flow.angle_limit] if getattr(flow, "kernel", "general") == "polynomial"
-                  else GENERAL_COST[layout])
-    return total

@@ -24,31 +24,18 @@ A rotation flow turns the *declared parts* of a state with m. A state is either 
 
 Rotations act on the last axis and broadcast over leading axes: ``x[..., k]``.
 
-The kernel (``cos_sin``). XLA's ``sin`` and ``cos`` reduce the angle's range and are
-evaluated separately: they dominate the cost of a rotation. A rotation's angle is bounded in
-advance whenever every flow of a step rotates m (then |m| is conserved, so |θ| <=
-|c|·|m0|·|t| for every sub-step t of the run): for |θ| <= L the ``"polynomial"`` kernel
-evaluates polynomials of cos θ and sin θ / θ in the shared θ², with no range reduction, each
-the shortest whose error on |θ| <= L is below a quarter of the dtype's epsilon
-(``_polynomials``: the Taylor series economized in Chebyshev polynomials, in exact
-arithmetic; 1–3 terms fewer in all than the truncated Taylor series at the same bound, 3–21 %
-less time per rotation in a batch, ``benchmarks/kernel.py``). Accurate to round-off:
-measured ≤ 0.5 ulp, cos² + sin² − 1 ≤ 2 ulp, in ``tests/test_kernel.py``. The smaller the
-bound, the fewer the terms (float64: 8 for L = 1/16, 16 for L = 1), so L is the smallest of
-``POLYNOMIAL_LIMITS`` above the run's bound (``angle_limit``), and an entry of a composition's
-word with a smaller weight takes the smaller L its own bound allows (``lower_limits``,
-``for_weight``); a rotation evaluates the half angle (``half_cos_sin``), so its polynomial is
-truncated for L/2. The map is the same exact
-rotation; only its trigonometry is evaluated differently. ``for_run`` selects the kernel
-once per run from the initial state (``Composition.for_run``, called by ``integrate``); the
-``"general"`` kernel is used otherwise. For a batch of free-body states a run also picks the
-layout (``COMPONENTS_FIRST_UP_TO``): components first (structure of arrays: each component
-contiguous over the batch, ``components_first``), or components last with each rotation a
-select on the component index that evaluates the polynomial once per state
-(``_with_components``).
+The kernel (``half_turn``). XLA's ``sin`` and ``cos`` reduce the angle's range and are
+evaluated separately: they dominated the cost of a rotation (40 ns against 2.5–3). Every
+rotation here is applied from the half-angle pair ±(cos θ/2, sin θ/2) as an increment
+(``half_cos_sin``), and that pair is needed only up to a common sign, so one straight-line
+kernel serves every angle: a Cody–Waite reduction modulo π and polynomials of cos and sin/φ
+on |r| <= π/2 (the Taylor series economized in Chebyshev polynomials, in exact arithmetic,
+to a quarter of the dtype's epsilon). No choice is made from values seen at a call, so a
+flow compiles to the same program whether ``integrate`` is called directly or under a
+user's ``jit``, ``vmap`` or ``grad``; a batch is the leading axes of the state, and only its
+last axis (the components) is ever addressed, which is exactly the axis ``vmap`` leaves last.
 """
 
-import dataclasses
 import functools
 import math
 from fractions import Fraction
@@ -58,11 +45,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..core._compose import Composition, entries_of, reach_of
 from ..core._errors import InputError
 from ..core._flows import AbstractFlow
 from ..core._loops import selects
-from ..core._memo import derived
 from ..core._state import fits_batch
 
 PARTS = ("momentum", "vector", "attitude", "quaternion", "fixed")
@@ -86,11 +71,12 @@ def hat(v):
     )
 
 
-KERNELS = ("general", "polynomial")
-# |θ| (rad) bounds with their own truncation; the largest is where the polynomial kernel stops
-# being cheaper than XLA's cos and sin for one state (benchmarks/kernel.py)
-POLYNOMIAL_LIMITS = (0.125, 0.25, 0.5, 1.0)
-POLYNOMIAL_LIMIT = POLYNOMIAL_LIMITS[-1]
+# Every rotation's trigonometry is ONE kernel, valid for every angle and the same whether the
+# call is the outermost one or sits under a user's ``jit``, ``vmap`` or ``grad`` (nothing is
+# chosen from concrete values): a Cody–Waite reduction modulo π, then polynomials of cos and
+# sin/φ on |r| <= π/2 (``half_turn``). XLA's own cos and sin cost 40 ns per rotation against
+# 2.5–3 for these polynomials (``benchmarks/results/kernel.md``).
+_PI = Fraction("3.14159265358979323846264338327950288419716939937510582097494459230781640628620899863")
 
 
 def _chebyshev_polynomials(n: int) -> list[list[int]]:
@@ -102,8 +88,8 @@ def _chebyshev_polynomials(n: int) -> list[list[int]]:
     return out[: n + 1]
 
 
-def _economized(offset: int, limit: float, tolerance: float, degree: int = 14) -> tuple[float, ...]:
-    """Coefficients in z = θ² of cos θ (``offset`` 0) or sin θ / θ (1) on |θ| <= ``limit``, as few
+def _economized(offset: int, limit, tolerance: float, degree: int = 22) -> tuple[float, ...]:
+    """Coefficients in z = φ² of cos φ (``offset`` 0) or sin φ / φ (1) on |φ| <= ``limit``, as few
     as keep the error below ``tolerance``: the Taylor series to ``degree`` (its remainder bounded
     by the first omitted term, the series alternating and decreasing), re-expanded in Chebyshev
     polynomials of z over [0, limit²], whose top terms are dropped while their summed
@@ -132,13 +118,33 @@ def _economized(offset: int, limit: float, tolerance: float, degree: int = 14) -
     return tuple(float(a) for a in in_z)
 
 
+def _rounded(value: Fraction, bits: int) -> Fraction:
+    """``value`` rounded to ``bits`` significant bits."""
+    scale = Fraction(2) ** (bits - 1 - math.floor(math.log2(value)))
+    return Fraction(round(value * scale)) / scale
+
+
 @functools.cache
-def _polynomials(dtype_name: str, limit: float = POLYNOMIAL_LIMIT) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Coefficients in θ² of cos θ and sin θ / θ for |θ| <= ``limit``, each the shortest whose
-    error there is below a quarter of the dtype's epsilon (``_economized``; float64: 8 terms in
-    all at |θ| <= 1/16 and 16 at 1, where the truncated Taylor series needs 10 and 19)."""
-    tolerance = float(np.finfo(dtype_name).eps) / 4
-    return _economized(0, limit, tolerance), _economized(1, limit, tolerance)
+def _kernel_constants(dtype_name: str):
+    """(π in three pieces, 1/π, the reduced range's bound, cos coefficients, sin/φ coefficients)
+    for one floating dtype.
+
+    The first two pieces of π carry ``digits − 21`` bits (at least 8; Cody–Waite), so n·piece
+    is exact for |n| < 2^k, k = 21 for float64 and 16 for float32, and r = φ − nπ is as
+    accurate as φ itself there; beyond, φ's own rounding already exceeds the reduction's error.
+    n = round(φ/π) is computed in the dtype, so |r| may exceed π/2 by the rounding of φ/π,
+    at most 2^k·eps·π: the polynomials' range (and the clip in ``half_turn``) includes that
+    margin, and their error there is below a quarter of the dtype's epsilon."""
+    info = np.finfo(dtype_name)
+    bits = max(info.nmant + 1 - 21, 8)
+    exact = info.nmant + 1 - bits
+    first = _rounded(_PI, bits)
+    second = _rounded(_PI - first, bits)
+    third = _PI - first - second
+    tolerance = float(info.eps) / 4
+    limit = _PI / 2 + Fraction(2) ** exact * Fraction(float(info.eps)) * _PI
+    return ((float(first), float(second), float(third)), float(1 / _PI), float(limit),
+            _economized(0, limit, tolerance), _economized(1, limit, tolerance))
 
 
 def _horner(coefficients, x):
@@ -148,59 +154,50 @@ def _horner(coefficients, x):
     return acc
 
 
-def cos_sin(angle, kernel: str = "general", limit: float = POLYNOMIAL_LIMIT, shared: bool = False):
-    """(cos θ, sin θ): the one place every rotation evaluates its trigonometry.
+def half_turn(phi):
+    """(c, s) = ±(cos φ, sin φ), ONE sign for both: the trigonometry of every rotation here.
 
-    ``kernel="general"``: XLA's cos and sin (any angle). ``"polynomial"``: for |θ| <= ``limit``
-    only (the caller guarantees it), polynomials in the shared θ² (``_polynomials``) accurate
-    to round-off there (see the module docstring). ``shared``: the pair feeds
-    several turned vectors (a state's parts, a state and its cotangent), so a scalar angle's
-    XLA cos and sin are evaluated once too (``_evaluated_once``; a batch's always are).
+    Rotations by θ = 2φ use only 2sc = sin θ and 2s² = 1 − cos θ (``half_cos_sin``), which the
+    common sign leaves unchanged, so φ is reduced modulo π, not 2π: n = round(φ/π),
+    r = φ − nπ in three Cody–Waite pieces (``_kernel_constants``), then (cos r, r·p(r²)) by
+    polynomials in r² accurate to a quarter of the dtype's epsilon on |r| <= π/2, with no
+    branch, table or select: the same straight-line code for every angle, batch and
+    transformation. Measured in ``tests/test_kernel.py``: within 2 ulp of NumPy's cos and sin
+    over |φ| <= 10⁴ (float64 and float32; float64 to 10¹² as well), c² + s² − 1 within 3 ulp at
+    every angle. Integer angles are taken as the default float dtype; the result has φ's
+    floating dtype.
     """
-    angle = jnp.asarray(angle)
-    if kernel == "polynomial":
-        cos_c, sin_c = _polynomials(np.dtype(angle.dtype).name, float(limit))
-        square = angle * angle
-        return _horner(cos_c, square), angle * _horner(sin_c, square)
-    pair = jnp.cos(angle), jnp.sin(angle)
-    return _evaluated_once(*pair) if angle.ndim or shared else pair
+    phi = jnp.asarray(phi)
+    if not jnp.issubdtype(phi.dtype, jnp.floating):
+        phi = phi.astype(jnp.result_type(float))
+    pieces, inverse_pi, bound, cos_c, sin_c = _kernel_constants(np.dtype(phi.dtype).name)
+    n = jnp.round(phi * inverse_pi)
+    r = phi
+    for piece in pieces:
+        r = r - n * piece
+    # where φ's own rounding exceeds π (float32 beyond ~1e7) n is off by a few: r stays in the
+    # polynomials' range, so the pair stays a unit pair (the angle was never resolved there)
+    r = jnp.clip(r, -bound, bound)
+    z = r * r
+    return _horner(cos_c, z), r * _horner(sin_c, z)
 
 
-@jax.custom_jvp
-def _evaluated_once(c, s):
-    """(c, s) unchanged, but computed in a kernel of their own, once per angle.
+def cos_sin(angle):
+    """(cos θ, sin θ) for any θ, from ``half_turn(θ/2)``: cos θ = 1 − 2s², sin θ = 2sc (exact signs).
 
-    Why: XLA's CPU fusion puts cos and sin inside every elementwise kernel that consumes them
-    and evaluates them again for each element it writes (2 per rotated vector and angle;
-    the reversible adjoint turns the state and its cotangent): 10³ heavy tops, 4 vectors
-    turned per angle, 160 ns per body and rotation instead of 40 (profiled). An
-    ``optimization_barrier`` does not prevent it; a reduction is never fused into its
-    elementwise consumers, so the pair goes through an exact one: a sum from −0.0 with a row
-    of −0.0 (x + (−0.0) = x for every x, −0.0 and NaN included; ``jnp.sum`` starts from +0.0).
-    For XLA's cos and sin of a batch, and of a scalar angle whose pair feeds several kernels
-    (``shared``): one kernel per turned vector, each evaluating the pair again (one heavy
-    top's reversible gradient: 5 rotations per step, 20 evaluations instead of 5; its
-    gradient / forward ran at 3.1×, now 2.2×). A scalar angle feeding one vector is left
-    alone (the free body's stored-trajectory gradient ran 15 % slower with it), and so is the
-    polynomial kernel: re-evaluating it costs less than the extra pass (free body, 4096
-    states: 1.5× slower with it, while XLA's cos and sin run 1.5× faster with it).
+    >>> import jax.numpy as jnp, jaxsplit
+    >>> c, s = jaxsplit.systems.so3.cos_sin(jnp.array(2.0))
+    >>> bool(abs(c - jnp.cos(2.0)) < 1e-15), bool(abs(s - jnp.sin(2.0)) < 1e-15)
+    (True, True)
     """
-    pair = jnp.stack([c, s])
-    negative_zero = jnp.asarray(-0.0, pair.dtype)
-    pair = jax.lax.reduce(jnp.stack([pair, jnp.full_like(pair, -0.0)]), negative_zero, jax.lax.add, (0,))
-    return pair[0], pair[1]
+    c, s = half_turn(jnp.asarray(angle) / 2)
+    u = s + s
+    return 1 - u * s, u * c
 
 
-@_evaluated_once.defjvp
-def _evaluated_once_jvp(primals, tangents):
-    # the identity to differentiation: tangents pass through, no reduction to transpose
-    return _evaluated_once(*primals), tangents
-
-
-def half_cos_sin(angle, kernel: str = "general", limit: float = POLYNOMIAL_LIMIT, shared: bool = False):
-    """(cos θ/2, sin θ/2) (by ``cos_sin``'s ``kernel``; for |θ| <= ``limit`` the polynomial is
-    truncated for |θ/2| <= ``limit``/2: fewer terms, the same accuracy): every rotation by θ is
-    applied from these, as an increment.
+def half_cos_sin(angle):
+    """±(cos θ/2, sin θ/2) with one sign (``half_turn``): every rotation by θ is applied from
+    these, as an increment.
 
     Why: a rounded pair (cos θ, sin θ) has cos² + sin² = 1 + δ with |δ| ~ ε, and the same δ
     every step when the angle is set by a conserved quantity (m_3 of a symmetric body, |m| of a
@@ -208,7 +205,7 @@ def half_cos_sin(angle, kernel: str = "general", limit: float = POLYNOMIAL_LIMIT
     = 2 sin²(θ/2), sin θ = 2 sin(θ/2) cos(θ/2)), the map's defect is 4 sin²(θ/2) δ = O(θ² ε) and
     the rest of the rounding is a random walk.
     """
-    return cos_sin(angle / 2, kernel, limit / 2, shared)
+    return half_turn(jnp.asarray(angle) / 2)
 
 
 def rotation_matrix(axis: int, angle):
@@ -232,42 +229,34 @@ def rotation_matrix(axis: int, angle):
     return jnp.stack([jnp.stack(row, axis=-1) for row in rows], axis=-2)
 
 
-def _component(x, k: int, first: bool = False):
-    return x[k] if first else x[..., k]
-
-
-def _with_components(x, new: dict, first: bool = False, select: bool = True):
-    """``x`` with the components ``new`` = {k: values} replaced (on its first axis if ``first``,
-    else on its last).
+def _with_components(x, new: dict, select: bool = True):
+    """``x`` with the components ``new`` = {k: values} of its last axis replaced.
 
     Why two forms: XLA compiles a ``stack`` (a concatenate) as one loop per piece, so what the
-    new components share (a rotation's cos and sin) is evaluated once per piece. On the last
-    axis a ``select`` on the component index keeps a state's components in one loop iteration,
-    where LLVM evaluates the shared part once (a rotation: 16 instead of 26 vector operations per
-    8 bodies) and XLA fuses two rotations per kernel; it is used where its constant component
+    new components share (a rotation's cos and sin) is evaluated once per piece. A ``select``
+    on the component index keeps a state's components in one loop iteration, where LLVM
+    evaluates the shared part once (a rotation: 16 instead of 26 vector operations per 8
+    bodies) and XLA fuses two rotations per kernel; it is used where its constant component
     tests are sure to stay in the kernel, inside jaxsplit's own loops (``core._loops``), and for
     bare m states only (``select``): for a state of parts (a heavy top's m and Γ) its rounding
     differs from the stack's, and the reversible gradient of a Lagrange top over 10⁵ steps
-    then agreed with the stored one to 1.1e-9 instead of 3.8e-11. Components first, each
-    component is a row of its own: there the stack, which copies the unchanged row, is the
-    faster (the layout is chosen per run, ``COMPONENTS_FIRST_UP_TO``)."""
-    if first or not (select and selects()):
-        axis = 0 if first else -1
-        return jnp.stack([new.get(k, _component(x, k, first)) for k in range(x.shape[axis])], axis=axis)
+    then agreed with the stored one to 1.1e-9 instead of 3.8e-11. Both forms see only the
+    state's last axis, so a batch on leading axes and one added by ``vmap`` run the same code."""
+    if not (select and selects()):
+        return jnp.stack([new.get(k, x[..., k]) for k in range(x.shape[-1])], axis=-1)
     index = jax.lax.broadcasted_iota(jnp.int32, x.shape, x.ndim - 1)
     for k, value in new.items():
         x = jnp.where(index == k, jnp.expand_dims(value, -1), x)
     return x
 
 
-def _turn_axis(x, axis: int, c, s, first: bool = False, select: bool = True):
-    """R_k x from (cos θ/2, sin θ/2) (``half_cos_sin``), as an increment on the two components it
-    changes: x_i + 2 sin(θ/2)(cos(θ/2) x_j − sin(θ/2) x_i), x_j − 2 sin(θ/2)(cos(θ/2) x_i + sin(θ/2) x_j)
-    (``first``: the components are on the first axis of ``x`` instead of the last)."""
+def _turn_axis(x, axis: int, c, s, select: bool = True):
+    """R_k x from ±(cos θ/2, sin θ/2) (``half_cos_sin``), as an increment on the two components
+    it changes: x_i + 2 sin(θ/2)(cos(θ/2) x_j − sin(θ/2) x_i), x_j − 2 sin(θ/2)(cos(θ/2) x_i + sin(θ/2) x_j)."""
     i, j = (axis + 1) % 3, (axis + 2) % 3
-    xi, xj = _component(x, i, first), _component(x, j, first)
+    xi, xj = x[..., i], x[..., j]
     u = s + s
-    return _with_components(x, {i: xi + u * (c * xj - s * xi), j: xj - u * (c * xi + s * xj)}, first, select)
+    return _with_components(x, {i: xi + u * (c * xj - s * xi), j: xj - u * (c * xi + s * xj)}, select)
 
 
 def rotate(x, axis: int, angle):
@@ -348,10 +337,11 @@ def quaternion_to_matrix(q):
     ], axis=-2)
 
 
-def _half_angle_increment(n, angle, kernel: str = "general", limit: float = POLYNOMIAL_LIMIT):
+def _half_angle_increment(n, angle):
     """r − 1 = 2 sin(θ/4)(−sin(θ/4), cos(θ/4) n) for r = (cos θ/2, sin θ/2 n), the quaternion of
-    exp(+θ hat(n)) = Rᵀ: q ⊗ r is applied as q + q ⊗ (r − 1) (see ``half_cos_sin``)."""
-    c, s = half_cos_sin(angle / 2, kernel, limit)
+    exp(+θ hat(n)) = Rᵀ: q ⊗ r is applied as q + q ⊗ (r − 1) (see ``half_cos_sin``; the
+    common sign of ``half_turn`` cancels in these products)."""
+    c, s = half_cos_sin(angle / 2)
     return (s + s)[..., None] * jnp.concatenate([-s[..., None], c[..., None] * n], axis=-1)
 
 
@@ -419,111 +409,15 @@ def _expand(a, extra: int):
     return a.reshape(a.shape + (1,) * extra)
 
 
-# The layout of a batch of bare m states (``for_run``). Components last, a rotation replaces two
-# components by a select (``_with_components``): one pass over the batch that evaluates the
-# polynomial once per state, two rotations per kernel; 1.1–1.3× faster than components first
-# for steps of 6 to 26 rotations, 32 to 10⁵ bodies (``benchmarks/layout.py``). Components first
-# (a kernel per rotation, each row contiguous) where that loses: a step of one or two rotations
-# fuses into one kernel that reads and writes the whole state, which XLA then copies every step
-# (the update reads other components, so it cannot be in place): 1.1–1.25× faster components
-# first; and angles above 1/4 (polynomials of 11 terms and more) can make a kernel of two
-# rotations costly enough for XLA's cost model to split it over two threads, which at a few
-# hundred bodies costs more than the kernel (256 bodies, Blanes–Casas–Murua 8, 640 steps: 1.2–1.6×
-# slower components last). The angle rule is conservative: at 1250 steps, where most of the
-# word's entries take shorter polynomials (``lower_limits``), components last is 1.1× faster.
-COMPONENTS_FIRST_UP_TO = 2
-COMPONENTS_LAST_UP_TO = POLYNOMIAL_LIMITS[1]
-
-
 class AbstractRotation(AbstractFlow):
     """A flow that turns m (and the declared parts) by an exact rotation whose angle is
-    rate·(a component of m)·t: |m| is conserved, so a step made only of such flows bounds
-    every angle of a run in advance (``for_run``). Subclasses declare the static fields
-    ``kernel`` and ``angle_limit`` (see ``cos_sin``), ``components_first`` and ``lower_limits``
-    (the shorter polynomials of a composition's smaller weights, ``for_weight``)."""
-
-    def __check_init__(self):
-        if self.kernel not in KERNELS:
-            raise InputError(f"kernel must be one of {KERNELS}, got {self.kernel!r}")
-        if self.angle_limit not in POLYNOMIAL_LIMITS:
-            raise InputError(f"angle_limit must be one of {POLYNOMIAL_LIMITS}, got {self.angle_limit!r}")
+    rate·(a component of m)·t. Its trigonometry is ``half_turn``'s, valid for every angle, so
+    the flow is the same program whatever the call's values and transformations."""
 
     def _momentum(self, state):
-        if self.components_first:
-            if tuple(state.shape[:1]) != (3,):
-                raise InputError(f"a components-first state needs shape (3, ...), got {tuple(state.shape)}")
-            m = state
-        else:
-            m = momentum(state, self.parts)
-        _check_batch(jnp.shape(self.rate), m.shape[1:] if self.components_first else m.shape[:-1])
+        m = momentum(state, self.parts)
+        _check_batch(jnp.shape(self.rate), m.shape[:-1])
         return m
-
-    def for_run(self, x0, t, step):
-        """This rotation with the fastest kernel for one run of ``step`` from ``x0`` with
-        sub-steps |s| <= ``t`` (concrete values): ``"polynomial"`` where every flow of ``step``
-        rotates the same parts (|m| is conserved) and the bound |rate|·max|m0|·t is at most
-        ``POLYNOMIAL_LIMIT``, truncated for the smallest of ``POLYNOMIAL_LIMITS`` above the
-        bound (``angle_limit``); else ``"general"``. A batch of bare m states gets its
-        components first unless the step is longer than ``COMPONENTS_FIRST_UP_TO`` rotations
-        and none of its angles exceeds ``COMPONENTS_LAST_UP_TO`` (decided alike by every
-        rotation of the step)."""
-        flows = getattr(step, "flows", (self,))
-        rotations = all(isinstance(f, AbstractRotation) and f.parts == self.parts for f in flows)
-        m = _momentum_or_none(x0, self.parts) if rotations else None
-        bound = _angle_bound(self.rate, m, t) if m is not None else None
-        limit = next((L for L in POLYNOMIAL_LIMITS if bound is not None and bound <= L), POLYNOMIAL_LIMIT)
-        kernel = "polynomial" if bound is not None and bound <= POLYNOMIAL_LIMIT else "general"
-        first = (m is not None and self.parts is None and all(isinstance(f, AxisRotation) for f in flows)
-                 and m.ndim >= 2 and not (getattr(step, "flows_per_step", 1) > COMPONENTS_FIRST_UP_TO
-                                          and _largest_angle(self, bound, step) <= COMPONENTS_LAST_UP_TO))
-        lower = _lower_limits(self, bound, limit, step) if kernel == "polynomial" else ()
-        choice = (kernel, limit, bool(first), lower)
-        if choice == (self.kernel, self.angle_limit, self.components_first, self.lower_limits):
-            return self
-        return derived(self, choice, lambda: dataclasses.replace(self, kernel=kernel, angle_limit=limit,
-                                                                  components_first=bool(first), lower_limits=lower))
-
-    def for_weight(self, weight: float):
-        """This rotation with its polynomial truncated for the word entry's own angle bound
-        (``lower_limits``; ``angle_limit`` covers the largest weight)."""
-        limit = dict(self.lower_limits).get(abs(weight), self.angle_limit)
-        return self if limit == self.angle_limit else dataclasses.replace(self, angle_limit=limit)
-
-
-def _lower_limits(rotation, bound, limit, step) -> tuple:
-    """((|weight|, limit), ...) for the entries of ``step``'s word that call ``rotation`` with
-    a weight whose angle bound (``bound`` scaled by the weight over the largest) lies under a
-    smaller one of ``POLYNOMIAL_LIMITS`` than ``limit``: a polynomial shorter by a term or more
-    (Blanes–Casas–Murua 8 at h = 0.5 on the standard body: 10 of one piece's 13 rotations).
-    Discrete, so a new h or body recompiles only when a choice changes."""
-    if not isinstance(step, Composition):
-        return ()
-    piece = next(k for k, f in enumerate(step.flows) if f is rotation)
-    weights = derived(step, ("weights", piece), lambda: _weights_of(entries_of(step), piece))
-    out = []
-    for w in weights:
-        own = next(L for L in POLYNOMIAL_LIMITS if bound * w / weights[-1] <= L or L == limit)
-        if own < limit:
-            out.append((w, own))
-    return tuple(out)
-
-
-def _weights_of(entries, piece: int) -> tuple[float, ...]:  # remembered per step by ``_lower_limits``
-    return tuple(sorted({abs(w) for p, w in entries if p == piece}))
-
-
-def _largest_angle(rotation, bound, step) -> float:
-    """The largest angle bound over ``step``'s rotations, from ``rotation``'s own ``bound``
-    (each rotation's bound is |rate|·max|m0|·(its largest weight)·h)."""
-    if bound is None or not isinstance(step, Composition):
-        return math.inf if bound is None else bound
-    scaled = derived(step, "scaled reach", lambda: tuple(w * _largest_rate(f.rate) for f, w in zip(step.flows, reach_of(step))))
-    own = next(value for f, value in zip(step.flows, scaled) if f is rotation)
-    return bound * max(scaled) / own if own else math.inf
-
-
-def _largest_rate(rate) -> float:
-    return float(np.max(np.abs(np.asarray(rate))))
 
 
 def _check_batch(parameter_shape, state_batch):
@@ -535,47 +429,11 @@ def _check_batch(parameter_shape, state_batch):
                          f"{tuple(parameter_shape) + (3,)}, or vmap over the bodies")
 
 
-def _momentum_or_none(x0, parts):
-    """m of a state laid out as ``parts`` declares, or None (a wrong layout is left for the call to refuse)."""
-    if parts is not None:
-        if not isinstance(x0, tuple) or len(x0) != len(parts):
-            return None
-        x0 = x0[parts.index("momentum")]
-    return x0 if isinstance(x0, jax.Array | np.ndarray) and x0.ndim >= 1 and x0.shape[-1] == 3 else None
-
-
-def _angle_bound(rate, m, t):
-    """max|rate|·max|m|·|t|: a bound on every angle of a run that conserves |m| (None where
-    a value is traced)."""
-    if any(isinstance(v, jax.core.Tracer) for v in (m, t, rate)):
-        return None
-    return _largest_rate(rate) * _largest_norm(m) * abs(float(t)) * (1 + 1e-6)
-
-
-def _largest_norm(m) -> float:
-    """max|m| over a batch, reduced where the batch lives: on the CPU by NumPy (a view of the
-    array, no dispatch; ``einsum`` without ``linalg.norm``'s temporaries: 81 ms instead of 264
-    for 10⁷ bodies), on an accelerator by one device reduction (copying the batch to the host
-    and reducing it there, once per flow, made ``for_run`` take 0.93 s for 10⁷ bodies on an H100,
-    against a 7.4 ms run of 20 Strang steps; ``benchmarks/results/for_run_cost-gpu.md``)."""
-    if isinstance(m, jax.Array) and any(d.platform != "cpu" for d in m.devices()):
-        return float(_device_largest_norm(m))
-    m = np.asarray(m)
-    return float(np.sqrt(np.max(np.einsum("...i,...i->...", m, m))))
-
-
-@jax.jit
-def _device_largest_norm(m):
-    return jnp.sqrt(jnp.max(jnp.sum(m * m, axis=-1)))
-
-
 class AxisRotation(AbstractRotation):
     """Exact flow of H = ½ c m_k²: every declared part turned by R_k(θ), θ = c m_k t.
 
     ``rate`` = c (an array: traced); ``axis`` = k and ``parts`` (see the module docstring)
-    are static, as are ``kernel``, ``angle_limit`` and ``components_first`` (chosen per run
-    by ``for_run``).
-    A one-parameter group (m_k is invariant).
+    are static. A one-parameter group (m_k is invariant).
 
     >>> import jax.numpy as jnp, jaxsplit
     >>> spin = jaxsplit.AxisRotation(2, jnp.array(0.5), ("momentum", "vector"))   # turns m and Γ together
@@ -589,10 +447,6 @@ class AxisRotation(AbstractRotation):
     axis: int = eqx.field(static=True)
     rate: jax.Array = eqx.field(converter=jnp.asarray)
     parts: tuple | None = eqx.field(static=True, default=None, converter=check_parts)
-    kernel: str = eqx.field(static=True, default="general")
-    angle_limit: float = eqx.field(static=True, default=POLYNOMIAL_LIMIT)
-    components_first: bool = eqx.field(static=True, default=False)
-    lower_limits: tuple = eqx.field(static=True, default=())
 
     def __check_init__(self):
         _check_axis(self.axis)
@@ -600,18 +454,18 @@ class AxisRotation(AbstractRotation):
     def angle(self, state, t):
         """θ = m_k · (rate · t): the scalar factor first, so a batch pays one product per state."""
         m = self._momentum(state)
-        return _component(m, self.axis, self.components_first) * (self.rate.astype(m.dtype) * t)
+        return m[..., self.axis] * (self.rate.astype(m.dtype) * t)
 
     def __call__(self, state, t):
         half = self.angle(state, t / 2)  # θ/2 exactly (halving is exact): ``half_cos_sin`` without its product
-        c, s = cos_sin(half, self.kernel, self.angle_limit / 2, shared=_turns_several(self.parts))
+        c, s = half_turn(half)
         if self.parts is None:  # the free body: the bare two-component update (hot path)
-            return _turn_axis(state, self.axis, c, s, self.components_first)
+            return _turn_axis(state, self.axis, c, s)
         e = jnp.zeros(3, half.dtype).at[self.axis].set(1)
         return _turn_state(state, self.parts,
                            lambda x, extra: _turn_axis(x, self.axis, _expand(c, extra), _expand(s, extra),
                                                        select=False),
-                           lambda: _half_angle_increment(e, half + half, self.kernel, self.angle_limit))
+                           lambda: _half_angle_increment(e, half + half))
 
     def step_back(self, x_after, t, ct_after):
         """The inverse rotation and the pullback in one pass, sharing cos and sin: m_k is
@@ -620,19 +474,19 @@ class AxisRotation(AbstractRotation):
         where g = ⟨ct_after, ∂_θ(R x)⟩ = Σ over turned parts of ct_i x_j − ct_j x_i (after)."""
         if self.parts is not None and "quaternion" in self.parts:
             return super().step_back(x_after, t, ct_after)
-        first, k = self.components_first, self.axis
+        k = self.axis
         i, j = (k + 1) % 3, (k + 2) % 3
         m = self._momentum(x_after)
-        m_k = _component(m, k, first)
+        m_k = m[..., k]
         rate = self.rate.astype(m.dtype)
         half = self.angle(x_after, t / 2)  # the forward half angle, bit for bit
-        c, s = cos_sin(half, self.kernel, self.angle_limit / 2, shared=True)  # state and cotangent
+        c, s = half_turn(half)  # shared by the state and the cotangent
 
         def back(v, extra):
-            return _turn_axis(v, k, _expand(c, extra), -_expand(s, extra), first, select=self.parts is None)
+            return _turn_axis(v, k, _expand(c, extra), -_expand(s, extra), select=self.parts is None)
 
         def torque(v, ct, extra):
-            g = _component(ct, i, first) * _component(v, j, first) - _component(ct, j, first) * _component(v, i, first)
+            g = ct[..., i] * v[..., j] - ct[..., j] * v[..., i]
             return jnp.sum(g, axis=-1) if extra else g
 
         if self.parts is None:
@@ -650,22 +504,17 @@ class AxisRotation(AbstractRotation):
                     ct.append(ct_leaf)
         along = g * rate * t  # θ = rate·m_k·t depends on m_k
         if self.parts is None:
-            ct = _add_to_component(ct, k, along, first)
+            ct = _add_to_component(ct, k, along)
         else:
             at = self.parts.index("momentum")
-            ct[at] = _add_to_component(ct[at], k, along, False, select=False)
+            ct[at] = _add_to_component(ct[at], k, along, select=False)
             rebuild = type(x_after)._make if hasattr(x_after, "_fields") else tuple
             x, ct = rebuild(x), rebuild(ct)
         return x, ct, [g * m_k * t], g * rate * m_k  # per state: summed over a batch once, by the caller
 
 
-def _turns_several(parts) -> bool:
-    """Whether a rotation turns more than one part of the state (its cos and sin are shared)."""
-    return parts is not None and sum(p != "fixed" for p in parts) > 1
-
-
-def _add_to_component(v, k: int, value, first: bool, select: bool = True):
-    return _with_components(v, {k: _component(v, k, first) + value}, first, select)
+def _add_to_component(v, k: int, value, select: bool = True):
+    return _with_components(v, {k: v[..., k] + value}, select)
 
 
 class VectorRotation(AbstractRotation):
@@ -682,21 +531,17 @@ class VectorRotation(AbstractRotation):
     direction: jax.Array = eqx.field(converter=jnp.asarray)
     rate: jax.Array = eqx.field(converter=jnp.asarray)
     parts: tuple | None = eqx.field(static=True, default=None, converter=check_parts)
-    kernel: str = eqx.field(static=True, default="general")
-    angle_limit: float = eqx.field(static=True, default=POLYNOMIAL_LIMIT)
-    components_first: bool = eqx.field(static=True, default=False)  # never set: acts on the last axis
-    lower_limits: tuple = eqx.field(static=True, default=())
 
     def __call__(self, state, t):
         m = self._momentum(state)
         n = self.direction.astype(m.dtype)
         n = n / jnp.linalg.norm(n, axis=-1, keepdims=True)
         angle = self.rate.astype(m.dtype) * jnp.sum(n * m, axis=-1) * t
-        c, s = half_cos_sin(angle, self.kernel, self.angle_limit)
+        c, s = half_cos_sin(angle)
 
         def turn(x, extra):
             nn = n.reshape(n.shape[:-1] + (1,) * extra + (3,))
             return _turn_vector(x, nn, _expand(c, extra), _expand(s, extra))
 
         return _turn_state(state, self.parts, turn,
-                           lambda: _half_angle_increment(n, angle, self.kernel, self.angle_limit))
+                           lambda: _half_angle_increment(n, angle))
