@@ -88,35 +88,20 @@ def test_round_off_at_the_smallest_pilot_steps_is_not_read_as_truncation_error()
     assert row["error_constant"] == pytest.approx(constant, rel=1e-9)
 
 
-def test_a_batch_is_costed_as_a_batch_in_either_layout_each_rotation_at_its_own_bound():
-    """The cost model weighs a batch's rotations by the batch table whichever layout ``for_run``
-    gives it (components last for a long word at small angles, first for Strang), each at the
-    polynomial its entry runs with: Strang's two entries share the run's bound (the one-bound
-    count holds exactly); Kahan–Li 8's shorter entries take shorter polynomials (``lower_limits``),
-    so it costs less than at one bound and more than if every entry took the smallest."""
+def test_the_cost_is_the_runs_sub_flows():
+    """Every rotation runs one kernel whatever its angle, so a candidate costs the sub-flows its run
+    evaluates: n steps of the merged word and a processor's P and P⁻¹ once."""
     from jaxsplit.systems import _auto
 
-    states = jnp.asarray(np.random.default_rng(1).standard_normal((16, 3)))
-    states = states / jnp.linalg.norm(states, axis=1, keepdims=True)
     hs, t = 1.5 * 2.0 ** -np.arange(0, 7.5, 0.5), 20.0
-    for scheme, first in (("kahan-li-8", False), ("strang", True)):
+    for scheme in ("kahan-li-8", "strang", "blanes-casas-murua-8"):
         step = jaxsplit.splitting(BODY, scheme, "casimir")
         p = step.scheme.order
-        # tol 1e-4: Kahan–Li 8 at h = 0.42, one piece's bound 1/4 and its shorter entries 1/8
-        row = _auto._candidate(step, step.scheme, "casimir", {}, hs, 1e-3 * hs**p * t, t, 1e-4, 100.0, states,
+        row = _auto._candidate(step, step.scheme, "casimir", {}, hs, 1e-3 * hs**p * t, t, 1e-4, 100.0, M0,
                                (2.2e-13, 1e-3))
-        fast = step.for_run(states, row["h"])
-        assert fast.structure_of_arrays == first and fast.kernel == "polynomial"
-        table = _auto.POLYNOMIAL_COST["batch"]
-        head, _, tail = fast._sequences()
-        rotations = row["n_steps"] * fast.flows_per_step + len(head) + len(tail)
-        one_bound = rotations * table[max(f.angle_limit for f in fast.flows)]
-        if first:
-            assert row["cost"] == pytest.approx(one_bound)
-        else:
-            assert any(f.lower_limits for f in fast.flows)
-            steps_at_one_bound = row["n_steps"] * fast.flows_per_step * table[max(f.angle_limit for f in fast.flows)]
-            assert rotations * min(table.values()) < row["cost"] < steps_at_one_bound  # the old count: equal
+        head, body, tail = step._sequences()
+        assert row["cost"] == row["n_steps"] * step.flows_per_step + len(head) + len(tail)
+        assert len(body) == step.flows_per_step
 
 
 def test_bad_requests_are_one_line_errors():

@@ -71,9 +71,7 @@ def test_states_at_1000_random_times(outputs_case):
     c0 = float(M0 @ M0)
     casimir = np.abs(np.sum(np.asarray(sol.x) ** 2, axis=1) / c0 - 1)
     assert np.max(casimir) <= CASIMIR_TOL
-    # one compilation for a new set of times of the same length (and a new h of the same kernel choice)
-    choice = lambda h: [(f.kernel, f.angle_limit) for f in step.for_run(M0, h).flows]
-    assert choice(0.04) == choice(h)  # the premise
+    # one compilation for a new set of times of the same length (and a new h)
     before = compilations()
     jaxsplit.integrate(step, M0, 0.04, ts=np.sort(rng.uniform(0.0, 20.0, 1000)))
     # outputs on the grid are the grid states (1000 times again: the same compiled program)

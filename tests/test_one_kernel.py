@@ -43,7 +43,7 @@ def program(fn, *args):
 def free_run(scheme, b, n=300, h=0.3):
     body = jaxsplit.RigidBody(jnp.asarray(jaxsplit.STANDARD_CASE.inertia))
     x0 = states(b)
-    step = jaxsplit.splitting(body, scheme, "casimir").for_run(x0, h)
+    step = jaxsplit.splitting(body, scheme, "casimir")
     return (lambda x: jaxsplit.integrate(step, x, h, n).final), x0
 
 
@@ -69,12 +69,15 @@ def test_the_limit_counts_the_state_as_lowered_vmapped_batches_included(limit):
     assert OURS in program(batched, jnp.stack([x_group] * 2)) and OURS not in program(batched, jnp.stack([x_group] * 16))
 
 
-def test_a_loop_under_the_floor_stays_a_plain_loop():
-    """One body: XLA's own small-loop pass makes it one kernel; no call of ours around it."""
-    assert _one_kernel.ONE_KERNEL_FROM_BYTES > 24
+def test_one_body_and_a_vmapped_batch_are_tagged_like_a_batch():
+    """The decision is taken where the shapes are final: one body's loop (XLA's own pass, at its
+    default 1 KiB, leaves a long scheme's loop as thunks) and 256 bodies arriving by ``vmap``
+    (each seen as one body while tracing) are tagged."""
     run, x0 = free_run("blanes-casas-murua-8", 1)
-    text = program(run, x0)
-    assert OURS not in text and "xla_cpu_small_call" in text
+    assert OURS in program(run, x0)
+    batch, xs = free_run("kahan-li-8", 256)
+    one = lambda x: batch(x)
+    assert OURS in program(jax.vmap(one), xs)
 
 
 def shear_flows(write):
