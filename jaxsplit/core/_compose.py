@@ -96,19 +96,84 @@ def merge(w: Word, mergeable=None) -> Word:
     return tuple((p, w) for p, w in out)
 
 
-def _apply(flows, w: Word, state, h):
+def _period(pieces: tuple[int, ...]) -> int:
+    """The shortest p with pieces[k] == pieces[k − p] for every k >= p (the sequence repeats a
+    pattern of p pieces; a tail shorter than p is a prefix of it)."""
+    return next(p for p in range(1, len(pieces) + 1) if pieces[p:] == pieces[:len(pieces) - p])
+
+
+# Per-step words longer than this run their repeating pattern as a loop (``run_word``): unrolled,
+# every sub-flow is a kernel of its own for XLA and LLVM to compile, and the compile time grew
+# with the word (a heavy top's Kahan–Li 6: 55 sub-flows, 21 s); rolled, one pattern compiles
+# whatever the length (``benchmarks/results/transformed.md``: compile and run times, rolled
+# and unrolled, per scheme).
+UNROLLED_UP_TO = 8
+
+
+def run_word(w: Word, carry, one, invariants, guarded: bool = False):
+    """``carry = one(piece, weight, carry, invariants)`` for each (piece, weight) of ``w`` in order.
+
+    A word longer than ``UNROLLED_UP_TO`` that repeats a pattern of pieces (every scheme's does:
+    a Strang or Lie step's pieces in a fixed order, only the weights differ) runs as a loop over
+    the repetitions, the weights a (repetitions, period) array indexed by the loop count; the
+    rest is unrolled with the weights as Python floats. ``guarded`` (flows that use the select
+    form, ``uses_selects``): the loop is ``_loops.threaded``'s (not one kernel of its own: it
+    sits inside the stepping loop's), so every value it uses goes through the barrier with its
+    state and the select form's tests stay in its kernels (a plain scan ran Kahan–Li 8 on 256
+    free bodies 1.25× slower); else a plain ``lax.scan`` over the weights (the threaded loop
+    ran 256 heavy tops 2.5× slower: its barrier keeps XLA from simplifying the flows' parameters).
+    Each sub-flow ends in an optimization barrier: without it XLA fuses a whole word into one
+    kernel that recomputes earlier sub-flows, and the cost grows geometrically with the word
+    length (Kahan-Li 6 on the axes split: minutes per step), with it ~20 ns per rotation.
+    """
+    pieces = tuple(p for p, _ in w)
+    period = _period(pieces) if pieces else 1
+    reps = len(w) // period if len(w) > UNROLLED_UP_TO else 0
+    if reps >= 2:
+        leaves = jax.tree_util.tree_leaves(invariants)
+        dtype = next((x.dtype for x in leaves if eqx.is_array(x) and jnp.issubdtype(x.dtype, jnp.floating)),
+                     jnp.result_type(float))
+        weights = jnp.asarray(np.array([c for _, c in w[:reps * period]]).reshape(reps, period), dtype)
+
+        def repetition(carry_k, inv_weights):
+            c, k = carry_k
+            inv, ws = inv_weights
+            row = ws[k]
+            for q in range(period):
+                c = jax.lax.optimization_barrier(one(pieces[q], row[q], c, inv))
+            return c, k + 1
+
+        if guarded:
+            carry, _ = threaded(repetition, (carry, jnp.zeros((), jnp.int32)), (invariants, weights), reps,
+                                one_call=False)
+        else:
+            def plain(c, row):
+                for q in range(period):
+                    c = jax.lax.optimization_barrier(one(pieces[q], row[q], c, invariants))
+                return c, None
+
+            carry = jax.lax.scan(plain, carry, weights)[0]
+        w = w[reps * period:]
     for piece, weight in w:
-        # The barrier keeps XLA from fusing a whole step into one kernel that recomputes
-        # earlier sub-flows: without it the cost grows geometrically with the word length
-        # (Kahan-Li 6 on the axes split: minutes per step), with it ~20 ns per rotation.
-        state = jax.lax.optimization_barrier(flows[piece](state, weight * h))
-    return state
+        carry = jax.lax.optimization_barrier(one(piece, weight, carry, invariants))
+    return carry
 
 
-# Sub-flow sequences run once per call (a processor's P and P⁻¹) longer than this run as data
-# (``_apply_rolled``): unrolled, each sub-flow is a kernel of its own to compile, which for
-# Blanes–Casas–Murua 8 (P: 40 sub-flows each way, K: 27) was 2–3× the compile time of a plain
-# order-8 scheme, for work done once per call. Per-step sequences stay unrolled (no switch).
+def _sub_flow(piece, weight, state, flows_h):
+    flows, h = flows_h
+    return flows[piece](state, weight * h)
+
+
+def _guarded(flows) -> bool:
+    return any(f.uses_selects for f in flows)
+
+
+def _apply(flows, w: Word, state, h):
+    return run_word(w, state, _sub_flow, (flows, h), _guarded(flows))
+
+
+# Sub-flow sequences run once per call (a processor's P and P⁻¹) longer than this that repeat no
+# pattern run as data (``_apply_rolled``): unrolled, each sub-flow is a kernel of its own to compile.
 ROLLED_ABOVE = 8
 
 
@@ -130,11 +195,16 @@ def _apply_rolled(flows, pieces, weights, state, h):
     return jax.lax.scan(sub_flow, state, (pieces, weights))[0]
 
 
+def _irregular(w: Word) -> bool:
+    """A long sequence that ``run_word`` would leave unrolled (no repeating pattern)."""
+    return len(w) > ROLLED_ABOVE and len(w) // _period(tuple(p for p, _ in w)) < 2
+
+
 def _apply_once(flows, w: Word, state, h):
-    """A sequence run once per call: rolled when long (``ROLLED_ABOVE``), else as ``_apply``."""
-    if len(w) <= ROLLED_ABOVE:
-        return _apply(flows, w, state, h)
-    return _apply_rolled(flows, *_as_arrays(w, h.dtype), state, h)
+    """A sequence run once per call: as ``_apply``, or as data where long and irregular."""
+    if _irregular(w):
+        return _apply_rolled(flows, *_as_arrays(w, h.dtype), state, h)
+    return _apply(flows, w, state, h)
 
 
 def _like_state(h, state):
@@ -248,6 +318,10 @@ class Composition(AbstractFlow):
     def is_group(self) -> bool:
         return False
 
+    @property
+    def uses_selects(self) -> bool:
+        return _guarded(self.flows)
+
     def entries(self) -> Word:
         """Every (piece, weight) sub-flow a call or a run may evaluate (sub-steps are weight·h),
         merges across steps included."""
@@ -307,16 +381,13 @@ class Composition(AbstractFlow):
             return lambda carry: jax.lax.scan(sub_flow, carry, (pieces, weights))[0]
 
         def back(sub_flows, flows_h=(self.flows, h)):
-            def run(carry):
-                for piece, weight in reversed(sub_flows):
-                    # as in _apply: keeps XLA from fusing (and recomputing) a whole word; without it a
-                    # Sofroniou–Spaletta 10 gradient (Casimir split) did not finish in 5 minutes
-                    carry = jax.lax.optimization_barrier(back_one(piece, weight, *carry, *flows_h))
-                return carry
-            return run
+            # as in _apply (``run_word``: barriers, and the pattern rolled); without the barriers a
+            # Sofroniou–Spaletta 10 gradient (Casimir split) did not finish in 5 minutes
+            one = lambda piece, weight, carry, fh: back_one(piece, weight, *carry, *fh)
+            return lambda carry: run_word(tuple(reversed(sub_flows)), carry, one, flows_h, _guarded(self.flows))
 
         def back_once(sub_flows):  # as _apply_once
-            return (back_rolled if len(sub_flows) > ROLLED_ABOVE else back)(sub_flows)
+            return (back_rolled if _irregular(sub_flows) else back)(sub_flows)
 
         static = isinstance(n, int)
         head, body, tail = self._sequences()

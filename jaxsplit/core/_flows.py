@@ -82,6 +82,12 @@ class AbstractFlow(eqx.Module):
         return True
 
     @property
+    def uses_selects(self) -> bool:
+        """Whether this flow's kernel uses the select form inside jaxsplit's loops (constant tests
+        that must stay inside the loop's kernels: ``core._loops``). Default: no."""
+        return False
+
+    @property
     def is_reversible(self) -> bool:
         """φ_{−t} = φ_t⁻¹ exactly (a group flow, a time-symmetric composition of such flows):
         what the reversible adjoint needs to rebuild states by stepping back."""

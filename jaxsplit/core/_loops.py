@@ -52,11 +52,12 @@ def plain_loops():
     return _switched_on(_PLAIN)
 
 
-def threaded(body, carry, invariants, n):
+def threaded(body, carry, invariants, n, one_call: bool = True):
     """``n`` times ``carry = body(carry, invariants)``: a ``lax.scan`` (Python int ``n``) or a
     ``while_loop`` (traced ``n``), the array leaves of ``invariants`` (and a traced bound)
     carried through an optimization barrier with ``carry`` (the module docstring says why),
-    the body traced with the select form on; through ``one_kernel`` unless ``plain_loops``."""
+    the body traced with the select form on; through ``one_kernel`` unless ``plain_loops`` or
+    ``one_call`` is False (a loop nested in another's kernel)."""
     arrays, rest = eqx.partition(invariants, eqx.is_array)
 
     def through(c):
@@ -65,7 +66,7 @@ def threaded(body, carry, invariants, n):
             state = body(state, eqx.combine(inv, rest))
         return jax.lax.optimization_barrier((state, inv))
 
-    run = (lambda loop, *args: loop(*args)) if _PLAIN.get() else one_kernel
+    run = (lambda loop, *args: loop(*args)) if _PLAIN.get() or not one_call else one_kernel
     if isinstance(n, int):
         return run(lambda c: jax.lax.scan(lambda c, _: (through(c), None), c, length=n)[0][0], (carry, arrays))
     # a traced count: a while loop whose bound goes through the barrier too (a fori_loop carries

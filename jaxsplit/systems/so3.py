@@ -182,6 +182,31 @@ def half_turn(phi):
     return _horner(cos_c, z), r * _horner(sin_c, z)
 
 
+@jax.custom_jvp
+def evaluated_once(c, s):
+    """(c, s) unchanged, but computed in a kernel of their own, once per angle: for a pair
+    that several vectors share (a heavy top's m and Γ, a state and its cotangent).
+
+    Why: XLA's CPU fusion puts the pair's arithmetic inside every elementwise kernel that
+    consumes it and evaluates it again for each element it writes (each new component of each
+    turned vector): 256 heavy tops, two vectors turned, 23 ns per body and sub-flow against
+    the free body's ~2. An ``optimization_barrier`` does not prevent it; a reduction is never
+    fused into its elementwise consumers, so the pair goes through an exact one: a sum from
+    −0.0 with a row of −0.0 (x + (−0.0) = x for every x, −0.0 and NaN included). A bare m
+    state turned inside jaxsplit's loops needs none: its select form evaluates the pair once.
+    """
+    pair = jnp.stack([c, s])
+    negative_zero = jnp.asarray(-0.0, pair.dtype)
+    pair = jax.lax.reduce(jnp.stack([pair, jnp.full_like(pair, -0.0)]), negative_zero, jax.lax.add, (0,))
+    return pair[0], pair[1]
+
+
+@evaluated_once.defjvp
+def _evaluated_once_jvp(primals, tangents):
+    # the identity to differentiation: tangents pass through, no reduction to transpose
+    return evaluated_once(*primals), tangents
+
+
 def cos_sin(angle):
     """(cos θ, sin θ) for any θ, from ``half_turn(θ/2)``: cos θ = 1 − 2s², sin θ = 2sc (exact signs).
 
@@ -451,6 +476,10 @@ class AxisRotation(AbstractRotation):
     def __check_init__(self):
         _check_axis(self.axis)
 
+    @property
+    def uses_selects(self) -> bool:
+        return self.parts is None  # a bare m state: ``_with_components``'s select form
+
     def angle(self, state, t):
         """θ = m_k · (rate · t): the scalar factor first, so a batch pays one product per state."""
         m = self._momentum(state)
@@ -459,6 +488,8 @@ class AxisRotation(AbstractRotation):
     def __call__(self, state, t):
         half = self.angle(state, t / 2)  # θ/2 exactly (halving is exact): ``half_cos_sin`` without its product
         c, s = half_turn(half)
+        if _turns_several(self.parts):
+            c, s = evaluated_once(c, s)
         if self.parts is None:  # the free body: the bare two-component update (hot path)
             return _turn_axis(state, self.axis, c, s)
         e = jnp.zeros(3, half.dtype).at[self.axis].set(1)
@@ -480,7 +511,7 @@ class AxisRotation(AbstractRotation):
         m_k = m[..., k]
         rate = self.rate.astype(m.dtype)
         half = self.angle(x_after, t / 2)  # the forward half angle, bit for bit
-        c, s = half_turn(half)  # shared by the state and the cotangent
+        c, s = evaluated_once(*half_turn(half))  # shared by the state and the cotangent
 
         def back(v, extra):
             return _turn_axis(v, k, _expand(c, extra), -_expand(s, extra), select=self.parts is None)
@@ -513,6 +544,11 @@ class AxisRotation(AbstractRotation):
         return x, ct, [g * m_k * t], g * rate * m_k  # per state: summed over a batch once, by the caller
 
 
+def _turns_several(parts) -> bool:
+    """Whether a rotation turns more than one part of the state (its cos and sin are shared)."""
+    return parts is not None and sum(p != "fixed" for p in parts) > 1
+
+
 def _add_to_component(v, k: int, value, select: bool = True):
     return _with_components(v, {k: v[..., k] + value}, select)
 
@@ -538,6 +574,8 @@ class VectorRotation(AbstractRotation):
         n = n / jnp.linalg.norm(n, axis=-1, keepdims=True)
         angle = self.rate.astype(m.dtype) * jnp.sum(n * m, axis=-1) * t
         c, s = half_cos_sin(angle)
+        if _turns_several(self.parts):
+            c, s = evaluated_once(c, s)
 
         def turn(x, extra):
             nn = n.reshape(n.shape[:-1] + (1,) * extra + (3,))
