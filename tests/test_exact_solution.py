@@ -226,7 +226,7 @@ def _condition(inertia, m0, t, eps=2.0**-53, h=mp.mpf("1e-12")):
 @pytest.mark.parametrize("kp2", [1e-4, 1e-8, 1e-12])
 def test_near_the_separatrix_the_error_is_within_the_problems_conditioning(kp2):
     """As k → 1 the solution itself grows sensitive (the period ~ log(1/k')): the error is held
-    to the condition estimate (measured 0.05–0.2 of it, benchmarks/results/exact_conditioning.md)."""
+    to the condition estimate (measured at most 0.17 of it, benchmarks/results/exact_conditioning.md)."""
     inertia = (4.0, 1.0, 0.25)
     delta = kp2 * 3.0 * (0.75 * 0.09 + 3.75 * 0.16) / (3.75 * 0.96)  # m3 = 0.4(1 + δ): k'² ≈ kp2
     m0 = (0.8, 0.3, 0.4 * (1 + delta))
