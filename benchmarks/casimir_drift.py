@@ -24,9 +24,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 jax.config.update("jax_enable_x64", True)
 
-import jaxsplit  # noqa: E402
-from _common import finish, header, log, machine_info  # noqa: E402
-from test_systems_long_runs import PATHS  # noqa: E402  (the tests' systems and parameter sets)
+from _common import finish, header, log, machine_info
+from test_systems_long_runs import PATHS
+
+import jaxsplit
 
 SCHEMES = ("strang", "suzuki-5", "kahan-li-6", "kahan-li-8")
 ANGLES = (0.02, 0.05, 0.2)  # h ρ
@@ -81,10 +82,10 @@ def main():
     largest = max(rows, key=lambda r: r["max_relative"][str(checkpoints[-1])])
     lines = header(out, f"Casimir drift over {n_steps} steps (`python benchmarks/casimir_drift.py"
                         f"{' --quick' if args.quick else ''}`)")
-    lines += ["Largest relative error of any conserved quantity but the energy (Casimirs; Q m and QᵀQ, or |q|, "
-              "for the attitude) over the run so far, every 100th state; slope: log-log slope of that running "
-              "maximum from 10³ steps on; last column: the whole run with ⟨m, Γ⟩'s error over |m₀||Γ₀| "
-              "instead of |⟨m₀, Γ₀⟩| (on set 2 of the tops |⟨m₀, Γ₀⟩| is 0.04–0.07 |m₀||Γ₀|).", "",
+    lines += [("Largest relative error of any conserved quantity but the energy (Casimirs; Q m and QᵀQ, or |q|, "
+               "for the attitude) over the run so far, every 100th state; slope: log-log slope of that running "
+               "maximum from 10³ steps on; last column: the whole run with ⟨m, Γ⟩'s error over |m₀||Γ₀| "
+               "instead of |⟨m₀, Γ₀⟩| (on set 2 of the tops |⟨m₀, Γ₀⟩| is 0.04–0.07 |m₀||Γ₀|)."), "",
               "| system | set | scheme | h ρ | h | " + " | ".join(f"after {c:.0e} steps" for c in checkpoints)
               + " | slope | ⟨m, Γ⟩ over \\|m₀\\|\\|Γ₀\\| |", "|---" * (7 + len(checkpoints)) + "|"]
     for r in rows:
@@ -95,13 +96,13 @@ def main():
     slopes = np.array([r["slope"] for r in rows])
     scaled = max(rows, key=lambda r: r["max_scaled"])
     lines += ["", "### Reading", "",
-              f"Over {len(rows)} runs the largest error after {checkpoints[-1]:.0e} steps is "
+              (f"Over {len(rows)} runs the largest error after {checkpoints[-1]:.0e} steps is "
               f"{largest['max_relative'][str(checkpoints[-1])]:.2g} ({largest['system']}, set "
               f"{largest['parameter_set']}, {largest['scheme']}, h ρ = {largest['h_rho']}); median {np.median(final):.2g}. "
               f"Slopes of the running maximum: median {np.nanmedian(slopes):.2f}, range "
               f"{np.nanmin(slopes):.2f} to {np.nanmax(slopes):.2f}. With ⟨m, Γ⟩ over |m₀||Γ₀| the largest is "
               f"{scaled['max_scaled']:.2g} ({scaled['system']}, set {scaled['parameter_set']}, {scaled['scheme']}, "
-              f"h ρ = {scaled['h_rho']})."]
+              f"h ρ = {scaled['h_rho']}).")]
     out["largest"] = largest
     finish("casimir_drift", out, lines, start, args.quick)
 

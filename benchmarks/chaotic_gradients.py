@@ -19,11 +19,11 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
-from _common import finish, header, log, machine_info  # noqa: E402
+import jax.numpy as jnp
+import numpy as np
+from _common import finish, header, log, machine_info
 
-import jaxsplit  # noqa: E402
+import jaxsplit
 
 H = 0.01
 INERTIA, CHI = jnp.array([1.0, 1.2, 0.6]), jnp.array([0.0, 0.05, 0.3])
@@ -91,8 +91,8 @@ def main():
     out["difference_over_eps_amplification"] = [min(ratios), max(ratios)]
     lines = header(out, "Gradients through a chaotic top (`python benchmarks/chaotic_gradients.py"
                         f"{' --quick' if args.quick else ''}`)")
-    lines += ["Λ: the largest singular value of ∂x_n/∂x_0 (how much the run amplifies a perturbation of "
-              "the state); ε = 2⁻⁵².", "",
+    lines += [("Λ: the largest singular value of ∂x_n/∂x_0 (how much the run amplifies a perturbation of "
+               "the state); ε = 2⁻⁵²."), "",
               "| weight | steps | largest gradient entry | Λ | reversible vs stored | ε Λ |",
               "|---|---|---|---|---|---|"]
     for r in sorted(rows, key=lambda r: (r["weight"], r["n_steps"])):
@@ -100,14 +100,14 @@ def main():
                      f"{r['reversible_vs_store']:.2g} | {r['eps_amplification']:.2g} |")
     worst = max(rows, key=lambda r: r["reversible_vs_store"])
     lines += ["", "### Reading", "",
-              "The two adjoints run the same steps and differ only in rounding (the reversible one rebuilds each "
+              ("The two adjoints run the same steps and differ only in rounding (the reversible one rebuilds each "
               "state by stepping back through the run). Their relative difference grows like Λ^a with a = "
               f"{slope:.2f} (fitted over the weights > 0 where it is below 0.1): round-off grows like the "
               f"dynamics: it is {min(ratios):.2g}–{max(ratios):.2g} × εΛ (one rounding amplified by Λ) there. "
               f"Largest difference: {worst['reversible_vs_store']:.2g} (weight {worst['weight']:g}, "
               f"{worst['n_steps']:,} steps, gradient entries up to {worst['largest_gradient']:.2g}, Λ = "
               f"{worst['amplification']:.2g}); where it reaches 1 the two gradients share no digit and neither "
-              "is the gradient of the exact flow."]
+              "is the gradient of the exact flow.")]
     finish("chaotic_gradients", out, lines, start, args.quick)
 
 

@@ -19,12 +19,12 @@ import jax
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 jax.config.update("jax_enable_x64", True)
 
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
-from _common import finish, header, log, machine_info  # noqa: E402
-from test_exact_solution import _condition, _float, mp_separatrix, mp_solution  # noqa: E402
+import jax.numpy as jnp
+import numpy as np
+from _common import finish, header, log, machine_info
+from test_exact_solution import _condition, _float, mp_separatrix, mp_solution
 
-import jaxsplit  # noqa: E402
+import jaxsplit
 
 INERTIA = (4.0, 1.0, 0.25)
 KP2 = (1e-2, 1e-4, 1e-6, 1e-8, 1e-12, 0.0)
@@ -64,10 +64,10 @@ def main():
     ratios = [r["error"] / r["condition"] for r in near]
     on = [r["error"] for r in rows if r["condition"] != r["condition"]]
     lines += ["", "### Reading", "",
-              f"Near the separatrix the error is {min(ratios):.2g}–{max(ratios):.2g} of the condition estimate: "
+              (f"Near the separatrix the error is {min(ratios):.2g}–{max(ratios):.2g} of the condition estimate: "
               "it grows as k → 1 and with t because the problem does (the period grows like log(1/k')), not "
               f"because of the elliptic functions. On the separatrix (k'² = 0) the closed form gives "
-              f"errors of at most {max(on):.2g} at the times listed."]
+              f"errors of at most {max(on):.2g} at the times listed.")]
     finish("exact_conditioning", out, lines, start)
 
 

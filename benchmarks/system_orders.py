@@ -9,6 +9,7 @@ step bound, and Kahan–Li 8's local slopes (consecutive ladder points inside th
 ``python benchmarks/system_orders.py``
 """
 
+import itertools
 import sys
 import time
 from pathlib import Path
@@ -18,11 +19,11 @@ import jax
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 jax.config.update("jax_enable_x64", True)
 
-import numpy as np  # noqa: E402
-from _common import finish, header, log, machine_info  # noqa: E402
-from test_systems_long_runs import COUNTS, MAX_ANGLE, ORDER_WINDOW, PATHS, SCHEMES, TAU  # noqa: E402
+import numpy as np
+from _common import finish, header, log, machine_info
+from test_systems_long_runs import COUNTS, MAX_ANGLE, ORDER_WINDOW, PATHS, SCHEMES, TAU
 
-import jaxsplit  # noqa: E402
+import jaxsplit
 
 
 def main():
@@ -46,7 +47,7 @@ def main():
                 free = jaxsplit.fit_order(hs, errors, ORDER_WINDOW)
                 inside = np.flatnonzero(free.used)
                 local = [float(np.log(errors[i] / errors[j]) / np.log(hs[i] / hs[j]))
-                         for i, j in zip(inside[:-1], inside[1:])]
+                         for i, j in itertools.pairwise(inside)]
                 rows.append({"system": label, "parameter_set": k + 1, "scheme": name,
                              "nominal": jaxsplit.schemes[name].order, "order": bounded.order,
                              "points": int(bounded.used.sum()),
@@ -56,9 +57,9 @@ def main():
                     f"without the step bound {free.order:.2f}")
     out["rows"] = rows
     lines = header(out, "Orders on the spinning-body systems (`python benchmarks/system_orders.py`)")
-    lines += ["The test's fit: errors in [1e-12, 1e-4] and largest sub-step |w| h ρ <= 0.5; the errors the fit "
-              "used; the same errors without the step bound; local slopes between consecutive points in the "
-              "error window (largest steps first).", "",
+    lines += [("The test's fit: errors in [1e-12, 1e-4] and largest sub-step |w| h ρ <= 0.5; the errors the fit "
+               "used; the same errors without the step bound; local slopes between consecutive points in the "
+               "error window (largest steps first)."), "",
               "| system | set | scheme | order (test's fit) | points | errors used | without step bound | local slopes |",
               "|---|---|---|---|---|---|---|---|"]
     for r in rows:

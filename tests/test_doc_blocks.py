@@ -23,7 +23,7 @@ import pytest
 from conftest import ROOT
 
 DOCUMENTS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
-FENCE = re.compile(r"^(?P<indent>[ \t]*)```(?P<lang>[^\n`]*)\n(?P<body>.*?)^(?P=indent)```[ \t]*$", re.M | re.S)
+FENCE = re.compile(r"^(?P<indent>[ \t]*)```(?P<lang>[^\n`]*)\n(?P<body>.*?)^(?P=indent)```[ \t]*$", re.MULTILINE | re.DOTALL)
 MARKER = re.compile(r"^<!--\s*(?P<kind>not run|run reduced)\s*:\s*(?P<text>.*?)\s*-->$")
 RUNNABLE = ("python", "bash")
 
@@ -100,7 +100,7 @@ ALL = {d.relative_to(ROOT).as_posix(): blocks(d) for d in DOCUMENTS}
 
 def test_every_block_is_runnable_or_says_why_not():
     problems = []
-    for name, found in ALL.items():
+    for found in ALL.values():
         for block in found:
             if block.lang not in RUNNABLE:
                 problems.append(f"{block.where}: fence language {block.lang!r} (use python or bash)")

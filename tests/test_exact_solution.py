@@ -206,10 +206,10 @@ def test_exact_on_the_separatrix(solve):
     assert np.max(np.abs(np.asarray(solve(jnp.asarray(inertia), jnp.asarray(m0), 0.7)) - later)) > 100 * EXACT_RTOL
 
 
-def _condition(inertia, m0, t, eps=2.0**-53, h=mp.mpf("1e-12")):
+def _condition(inertia, m0, t, eps=2.0**-53, h=1e-12):
     """ε Σ_x |∂m(t)/∂x · x| over the inputs x (m0, the moments, t), max over components, by
     30-digit differences: the error a perturbation of every input by one rounding causes."""
-    base = mp_solution(inertia, m0, t)[0]
+    base, h = mp_solution(inertia, m0, t)[0], mp.mpf(h)
     total = 0
     for which in range(7):
         mm, ii, tt = [mp.mpf(x) for x in m0], [mp.mpf(x) for x in inertia], mp.mpf(t)
