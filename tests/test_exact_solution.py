@@ -178,6 +178,7 @@ def test_the_states_lie_exactly_on_the_separatrix_and_the_reference_solves_the_o
     i1, i2, i3 = _axes(inertia)
     w, m = 1 / np.asarray(inertia), np.asarray(m0)
     assert (w[i3] - w[i2]) * m[i3] ** 2 - (w[i2] - w[i1]) * m[i1] ** 2 == 0.0
+    assert m @ m - np.sum(m * m * w) * inertia[i2] == 0.0  # |m|² − 2E I_b, the outside review's form
     wm, mm = [1 / mp.mpf(i) for i in inertia], [mp.mpf(x) for x in m0]
     assert (wm[i3] - wm[i2]) * mm[i3] ** 2 - (wm[i2] - wm[i1]) * mm[i1] ** 2 == 0
     assert max(abs(a - b) for a, b in zip(mp_separatrix(inertia, m0, 0), mm)) < REFERENCE_RESIDUAL
