@@ -1,15 +1,19 @@
 """mkdocs hooks: the pages generated from the code at build time.
 
 * ``api/<area>.md``: one mkdocstrings entry for every public name of ``jaxsplit`` (read from
-  the re-exports in ``jaxsplit/__init__.py``, grouped by the package that defines them) and
-  for ``jaxsplit.diffrax``, so a new public name gets its API entry without editing the docs;
+  the re-exports in ``jaxsplit/__init__.py``, grouped by the package that defines them, each
+  once; the package's own top-level modules (``_xla_cpu``: compiler settings) form the last
+  page, "Tuning"; ``DOCUMENTED_WITH`` places a name beside the one it belongs with) and for
+  ``jaxsplit.diffrax``, so a new public name gets its API entry without editing the docs;
 * ``schemes.md``: the scheme table, from the registry;
 * ``notebooks/*.ipynb``: executed copies, rendered by mkdocs-jupyter without executing. They
   come from ``$JAXSPLIT_DOCS_NOTEBOOKS`` (a folder named ``notebooks``; the test suite executes each notebook once and points
   here), else from ``build/notebooks/`` (executed here, at reduced size, when missing or older
   than the source);
-* ``audit.md``: the seed-paper audit report of ``jaxsplit paper --out build/audit`` when that
-  directory exists (it takes about a minute, so the build does not run it).
+* ``audit.md``: the seed-paper audit report. It comes from ``$JAXSPLIT_DOCS_AUDIT`` (a folder
+  holding an audit: the test suite runs one claim there), else from ``build/audit/``, which the
+  build writes with ``jaxsplit paper`` when it is missing or older than ``jaxsplit/paper/`` (about
+  95 s on 2 cores; later builds reuse it).
 """
 
 import ast
@@ -27,21 +31,35 @@ AREAS = {  # package -> (title, one line on what it owns)
     "classical": ("Classical methods", "Runge–Kutta methods and Ruth's method on any PyTree state."),
     "explore": ("Exploration", "Sweeps, stability maps, fitting and tuning over families of systems."),
     "paper": ("Paper audit", "The seed paper's claims re-derived numerically."),
+    "tuning": ("Tuning", "Compiler settings of jaxsplit's own programs on the CPU (the command line applies them)."),
 }
+# name -> the public name it is documented beside: ``splitting`` builds a ``Composition`` from a
+# system's flows (it lives in ``systems`` because it asks the system for its split)
+DOCUMENTED_WITH = {"splitting": "compose"}
 
 
 def public_names() -> dict[str, list[str]]:
-    """{area: [public names]} from the ``from .area._module import X as X`` lines of
-    ``jaxsplit/__init__.py`` (read statically: the package loads them lazily)."""
+    """{area: [public names]} from the ``from .area._module import X as X`` lines of the
+    ``if TYPE_CHECKING:`` block of ``jaxsplit/__init__.py`` (read statically: the package loads
+    them lazily; the one list of public names), each name once."""
     tree = ast.parse((ROOT / "jaxsplit" / "__init__.py").read_text())
+    block = next(node for node in tree.body if isinstance(node, ast.If))
     areas: dict[str, list[str]] = {area: [] for area in AREAS}
-    for node in ast.walk(tree):
+    placed = {}
+    for node in block.body:
         if isinstance(node, ast.ImportFrom) and node.level == 1 and node.module:
             area = node.module.split(".")[0]
-            area = "core" if area.startswith("_") else area  # the package's own top-level modules (_xla_cpu)
-            if area in areas:
-                areas[area] += [alias.asname or alias.name for alias in node.names]
-    return areas
+            area = "tuning" if area.startswith("_") else area  # the package's own top-level modules (_xla_cpu)
+            for name in (alias.asname or alias.name for alias in node.names):
+                if area in areas and name not in placed:
+                    placed[name] = area
+                    areas[area].append(name)
+    for name, beside in DOCUMENTED_WITH.items():
+        if name in placed and beside in placed:
+            areas[placed[name]].remove(name)
+            group = areas[placed[beside]]
+            group.insert(group.index(beside) + 1, name)
+    return {area: names for area, names in areas.items() if names}
 
 
 def _api_page(area: str, names: list[str]) -> str:
@@ -130,14 +148,32 @@ def _executed_notebooks() -> pathlib.Path:
     return out
 
 
-def _audit_page() -> tuple[str, list[pathlib.Path]]:
+def _audit() -> pathlib.Path:
+    """The folder holding the audit to show: ``$JAXSPLIT_DOCS_AUDIT``, else ``build/audit``,
+    (re)written by ``jaxsplit paper`` when its report is missing or older than the audit's code."""
+    import subprocess
+    import sys
+
+    given = os.environ.get("JAXSPLIT_DOCS_AUDIT")
+    if given:
+        return pathlib.Path(given)
     audit = ROOT / "build" / "audit"
     report = audit / "report.md"
+    newest = max(p.stat().st_mtime for p in (ROOT / "jaxsplit" / "paper").rglob("*.py"))
+    if not report.exists() or report.stat().st_mtime < newest:
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]))
+        run = subprocess.run([sys.executable, "-m", "jaxsplit", "paper", "--out", str(audit), "--force"], env=env,
+                             capture_output=True, text=True, check=False)
+        if run.returncode != 0:
+            raise RuntimeError(f"jaxsplit paper --out {audit} exited {run.returncode}: {run.stderr[-2000:]}")
+    return audit
+
+
+def _audit_page() -> tuple[str, list[pathlib.Path]]:
+    audit = _audit()
+    report = audit / "report.md"
     if not report.exists():
-        return ("# Audit of the seed paper\n\nEvery checkable claim of the seed paper is re-derived numerically "
-                "by `jaxsplit paper --out build/audit` (~95 s on 2 cores): `claims.json` (id, statement, "
-                "verdict, evidence), `report.md` and figures. Run it, then rebuild the site: this page then "
-                "shows the report.\n"), []
+        raise FileNotFoundError(f"no audit report in {audit} (JAXSPLIT_DOCS_AUDIT must name a `jaxsplit paper` output)")
     return report.read_text(), sorted(p for p in audit.iterdir() if p.suffix in (".png", ".svg"))
 
 

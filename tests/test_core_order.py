@@ -89,7 +89,7 @@ def test_measured_order_matches_nominal(name, split, problem):
     fit = jaxsplit.fit_order(hs, errors, ORDER_WINDOW, max_step=max_step)
     assert abs(fit.order - scheme.order) <= ORDER_TOL, (
         f"{name}/{split}/{problem}: measured order {fit.order:.2f}, nominal {scheme.order}; "
-        f"errors {np.array2string(errors, precision=2)}"
+        f"errors {np.array2string(errors, formatter={'float_kind': lambda v: f'{v:.2e}'})}"
     )
 
 
@@ -99,6 +99,12 @@ def test_order_fit_detects_a_wrong_order():
     hs, errors = jaxsplit.global_errors(step, STANDARD_M0, T_END, jaxsplit.ladder(200),
                                         PROBLEMS["standard-reference"][3])
     assert abs(jaxsplit.fit_order(hs, errors).order - 4) > ORDER_TOL
+
+
+def test_the_refusal_prints_small_errors_readably():
+    """Issue 31: errors of 1e-3 printed as ``[0. 0. 0. 0.]`` (NumPy's fixed notation at precision 2)."""
+    with pytest.raises(jaxsplit.InputError, match=r"errors were \[2\.17e-03 1\.39e-03 8\.73e-04 5\.41e-04\]"):
+        jaxsplit.fit_order([0.25, 0.2, 0.16, 0.125], [2.17e-3, 1.39e-3, 8.73e-4, 5.41e-4])
 
 
 def test_triple_jump_of_any_even_order_resolves_by_name():

@@ -27,13 +27,21 @@ def mkdocs_build(config: pathlib.Path, site: pathlib.Path, env=None):
     return run.returncode, run.stdout + run.stderr, time.perf_counter() - start
 
 
+AUDIT_CLAIM = "stages"  # one claim of the audit (a fraction of a second): the page shows its report
+
+
 @pytest.fixture(scope="module")
 def site(executed_notebooks, tmp_path_factory):
+    from jaxsplit.cli import main
+
     folder, runs = executed_notebooks
     if any(code for code, _ in runs.values()):
         pytest.fail("a notebook failed to execute (see test_notebooks); the site renders executed copies")
+    audit = tmp_path_factory.mktemp("audit") / "audit"
+    assert main(["paper", "--out", str(audit), "--claims", AUDIT_CLAIM]) == 0
     out = tmp_path_factory.mktemp("site")
-    code, log, seconds = mkdocs_build(ROOT / "mkdocs.yml", out, {"JAXSPLIT_DOCS_NOTEBOOKS": str(folder)})
+    code, log, seconds = mkdocs_build(ROOT / "mkdocs.yml", out, {"JAXSPLIT_DOCS_NOTEBOOKS": str(folder),
+                                                                 "JAXSPLIT_DOCS_AUDIT": str(audit)})
     print(f"mkdocs build --strict: {seconds:.1f} s")
     return code, log, out
 
@@ -64,8 +72,28 @@ def test_every_public_name_is_listed_where_the_api_pages_look():
     assert not public - listed, public - listed
 
 
+def test_the_navigation_lists_every_notebook_and_api_page():
+    """Issue 31: notebook 04 was missing from the navigation (a page outside it is still built, so
+    the strict build did not notice)."""
+    nav = (ROOT / "mkdocs.yml").read_text()
+    pages = [f"notebooks/{nb.name}" for nb in docs_hooks().NOTEBOOKS]
+    pages += [f"api/{area}.md" for area in docs_hooks().public_names()] + ["api/index.md", "api/diffrax.md"]
+    assert [p for p in pages if f"- {p}" not in nav] == []
+
+
+def test_api_pages_list_each_name_once_tuning_last_splitting_with_compose():
+    areas = docs_hooks().public_names()
+    names = [n for group in areas.values() for n in group]
+    assert len(names) == len(set(names))
+    assert list(areas)[-1] == "tuning" and "compiler_options" in areas["tuning"]
+    assert areas["core"].index("splitting") == areas["core"].index("compose") + 1
+    assert not any(n in areas["core"] for n in areas["tuning"])
+
+
 def test_generated_pages(site):
     _, _, out = site
+    audit = (out / "audit" / "index.html").read_text()
+    assert AUDIT_CLAIM in audit and "corrected" in audit and "Run it, then rebuild" not in audit  # the report
     table = (out / "schemes" / "index.html").read_text()
     assert all(f"<code>{name}</code>" in table for name in jaxsplit.schemes)
     for notebook in (out / "notebooks").iterdir():

@@ -62,7 +62,8 @@ def fit_order(step_sizes, errors, window=ORDER_WINDOW, max_step: float = np.inf,
         raise InputError(
             f"only {int(used.sum())} points lie in the fit window {window}, h <= {max_step:g} "
             f"(need {min_points}): "
-            f"errors were {np.array2string(e, precision=2)}; choose other step counts"
+            f"errors were {np.array2string(e, formatter={'float_kind': lambda v: f'{v:.2e}'})}; "
+            "choose other step counts"
         )
     slope = np.polyfit(np.log(h[used]), np.log(e[used]), 1)[0]
     return OrderFit(float(slope), h, e, used)

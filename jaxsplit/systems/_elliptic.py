@@ -11,7 +11,8 @@ k'² without cancellation (the free body near its separatrix) passes it exactly.
   k'² at every step and ends at k = 1 to beyond double precision, where sn, cn, dn are tanh,
   sech, sech. (The descending recursion alone loses ~1/√k' to an ill-conditioned arcsin as
   k → 1; the ascending one needs k bounded away from 0: each is used where it is exact.)
-  Below the smallest normal k'² (the separatrix) K = ∞ and the k = 1 functions are exact.
+  Below the smallest normal k'² (the separatrix) K = ∞, u is not reduced, and (sn, cn, dn)
+  are the closed forms (tanh u, sech u, sech u).
 * ``carlson_rf(x, y, z)``, ``carlson_rj(x, y, z, p)``: Carlson's symmetric integrals by the
   duplication theorem with the fifth-order series (Carlson 1995, Numer. Algorithms 10; DLMF
   19.36(i)). The arguments' spread shrinks 4× per step once they are within a factor ~2 of
@@ -87,9 +88,15 @@ def _ascending(u, k2, kp2):
         r, mu = step
         return ((1 + r) * sn * cn / dn, (1 + r) / mu * (dn * dn - r) / dn, (1 - r) / mu * (dn * dn + r) / dn), None
 
-    sech = 1 / jnp.cosh(u)
+    sech = _sech(u)
     (sn, cn, dn), _ = jax.lax.scan(down, (jnp.tanh(u), sech, sech), steps, reverse=True)
     return sn, cn, dn
+
+
+def _sech(u):
+    """sech u = 2e^{−|u|} / (1 + e^{−2|u|}): no overflow of cosh for |u| > 710, finite derivative."""
+    e = jnp.exp(-jnp.abs(u))
+    return 2 * e / (1 + e * e)
 
 
 def on_separatrix(kp2):
@@ -108,12 +115,17 @@ def jacobi_reduced(u, k2, kp2, big_k=None):
     (so cn(u_r) >= 0 and am(u) = am(u_r) + jπ): what the integrals along an orbit need.
     ``big_k`` = K(k) when the caller has it (it is a constant of an orbit)."""
     big_k = complete_k(kp2) if big_k is None else big_k
-    turns = jnp.round(u / (2 * big_k))
-    u = u - 2 * big_k * jnp.where(turns == 0, 0.0, turns)  # K = ∞ at the separatrix: no reduction
+    separatrix = on_separatrix(kp2)
+    # K = ∞ on the separatrix: no half periods, u is not reduced (never ∞·0, also in a gradient)
+    period = jnp.where(separatrix, 1.0, 2 * big_k)
+    turns = jnp.where(separatrix, 0.0, jnp.round(u / period))
+    u = u - period * turns
     near_one = kp2 < 0.5
     d = _descending(u, jnp.where(near_one, 0.25, k2), jnp.where(near_one, 0.75, kp2))
     a = _ascending(u, jnp.where(near_one, k2, 0.75), jnp.where(near_one, kp2, 0.25))
     sn, cn, dn = (jnp.where(near_one, x, y) for x, y in zip(a, d))
+    sech = _sech(u)  # k = 1: the closed form (tanh, sech, sech), exact whatever k² rounded to
+    sn, cn, dn = (jnp.where(separatrix, x, y) for x, y in zip((jnp.tanh(u), sech, sech), (sn, cn, dn)))
     return sn, cn, dn, turns
 
 

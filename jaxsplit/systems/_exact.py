@@ -39,8 +39,15 @@ Equilibria (m along a principal axis, in a plane of equal moments, or m = 0: D_1
 v_2 = v_3, or m_1 = m_3 = 0) are steady rotations, m(t) = m_0 and Q(t) = Q_0 exp(t hat(Wm_0));
 the elliptic branch then runs on a safe placeholder so that nothing is NaN.
 
+On the separatrix (k'² = 0: D_2 = 0 exactly) K = ∞, τ is not reduced, and sn, cn, dn are
+tanh, sech, sech: m_1, m_3 decay like sech τ and m_2 → ±A_2 = ±G (the saddle) as t → ±∞.
+
 Accuracy (float64, against mpmath at 30 digits, ``tests/test_exact_solution.py``): ~1e-15
-relative to |m| for moderate τ, growing like ε·|τ| — the conditioning of the problem itself.
+relative to |m| for moderate τ, growing like ε·|τ|; near the separatrix the problem itself
+grows ill-conditioned (the period grows like log(1/k')), and the error stays below what one
+rounding of each input causes (``benchmarks/results/exact_conditioning.md``: at most 0.17 of it,
+e.g. 4e-9 at k² = 1 − 1e-8, t = 10³). On the separatrix itself: ≤ 1e-13 (five states, exact
+in binary).
 """
 
 from typing import NamedTuple
