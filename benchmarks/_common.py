@@ -113,8 +113,7 @@ def machine_info(command: str) -> dict:
         "machine": f"{platform.machine()}, {os.cpu_count()} CPUs ({cpu_name()}; shared with other jobs), {device_name()}",
         "git": head + (" + uncommitted library changes" if dirty else ""),
         "load_average_at_start": [round(v, 2) for v in os.getloadavg()],
-        "xla_small_loops": jaxsplit.small_loop_setting(),
-        "compiler_options": jaxsplit.compiler_options(),
+        "xla_flags": os.environ.get("XLA_FLAGS", ""),
         "versions": {"python": platform.python_version(), "jax": jax.__version__, "numpy": np.__version__,
                      "jaxsplit": jaxsplit.__version__},
     }
@@ -123,8 +122,7 @@ def machine_info(command: str) -> dict:
 def header(out: dict, title: str) -> list[str]:
     return [f"## {title}", "", (f"`{out['command']}` — {out['date_utc']}; {out['machine']}; load average at start "
             f"{', '.join(f'{v:.1f}' for v in out['load_average_at_start'])}; JAX {out['versions']['jax']}; "
-            f"jaxsplit at {out['git']}; XLA small loops {out['xla_small_loops']}; jaxsplit's programs compiled "
-            f"with {out.get('compiler_options') or 'XLA defaults'}."), ""]
+            f"jaxsplit at {out['git']}; XLA_FLAGS `{out.get('xla_flags') or ''}`."), ""]
 
 
 def finish(stem: str, out: dict, lines: list[str], start: float, quick: bool = False):
