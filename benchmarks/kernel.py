@@ -2,13 +2,13 @@
 
 Candidates for (cos θ, sin θ) inside a run of rotations (Strang, Casimir split: two
 rotations per step, the library's own ``_turn_axis``): XLA's ``cos`` + ``sin`` (the
-general kernel), polynomials in the shared θ² accurate to round-off for |θ| <= L, L = 1/8,
-1/4, 1/2, 1 (``so3.POLYNOMIAL_LIMITS``: a run uses the smallest L above its angle bound), either
-the truncated Taylor series or the library's Chebyshev-economized one (``so3._polynomials``: the
-same error bound, eps/4, with fewer terms), and the half-angle form
-(polynomials at θ/2, then cos θ = 1 − 2 s², sin θ = 2 s c). float64 and float32; one
-trajectory (B = 1) and a batch of B = 10⁴ states laid out components-first. Accuracy:
-max error over a dense grid of |θ| <= L against NumPy's float64 cos/sin, in ulps.
+general kernel), the truncated Taylor series accurate to round-off for |θ| <= L only, L =
+1/8, 1/4, 1/2, 1 (the kernels of the library before it needed one valid for every angle
+under every transformation), and the library's ``so3.cos_sin`` (``half_turn``: a reduction
+modulo π and Chebyshev-economized polynomials on |r| <= π/2, any angle). float64 and
+float32; one trajectory (B = 1) and a batch of B = 10⁴ states (B, 3). Accuracy: max error
+over a dense grid of |θ| <= L (the library's and XLA's: |θ| <= 20) against NumPy's float64
+cos/sin, in ulps.
 
     python benchmarks/kernel.py [--quick]
 
@@ -78,22 +78,23 @@ general.terms = 0
 
 def kernels(dtype):
     out = {"general (XLA cos + sin)": general}
-    for limit in so3.POLYNOMIAL_LIMITS:
+    for limit in (0.125, 0.25, 0.5, 1.0):
         out[f"Taylor, L = {limit:g}"] = taylor(limit, dtype)
-        out[f"economized (the library's), L = {limit:g}"] = taylor(limit, dtype, so3._polynomials)
-    out["half-angle Taylor, L = 1"] = half_angle(1.0, dtype)
+    library = lambda theta: so3.cos_sin(theta)
+    library.terms = sum(len(c) for c in so3._kernel_constants(np.dtype(dtype).name)[3:])
+    out["the library's (half_turn: reduced modulo π, economized; any angle)"] = library
     return out
 
 
-def strang_run(cos_sin, n, first):
+def strang_run(cos_sin, n):
     """n Strang steps of the Casimir split (axes 0 and 2 turn, shift 1), rotations as in the library."""
     rates = (0.5 - 1.0, 1.5 - 1.0)
 
     def run(x, h):
         def rotation(y, axis, rate, t):
-            theta = rate * t * so3._component(y, axis, first)
-            c, s = cos_sin(theta)
-            return jax.lax.optimization_barrier(so3._turn_axis(y, axis, c, s, first))
+            theta = rate * t * y[..., axis]
+            c, s = cos_sin(theta / 2)  # the half angle, as the library's rotations
+            return jax.lax.optimization_barrier(so3._turn_axis(y, axis, c, s))
 
         def body(y, _):
             return rotation(rotation(y, 0, rates[0], h), 2, rates[1], h), None
@@ -121,24 +122,24 @@ def main(argv=None):
     out = machine_info(command)
     start = time.perf_counter()
     repeats = 3 if quick else 7
-    layouts = {"B = 1": (1, 20_000 if quick else 200_000), "B = 10⁴, components first": (10_000, 20 if quick else 200)}
+    layouts = {"B = 1": (1, 20_000 if quick else 200_000), "B = 10⁴": (10_000, 20 if quick else 200)}
     rng = np.random.default_rng(0)
     rows = []
     for dtype in (jnp.float64, jnp.float32):
         for layout, (b, n) in layouts.items():
-            x = rng.standard_normal((3, b)) if b > 1 else rng.standard_normal(3)
-            x = jnp.asarray(x / np.linalg.norm(x, axis=0), dtype)
+            x = rng.standard_normal((b, 3)) if b > 1 else rng.standard_normal(3)
+            x = jnp.asarray(x / np.linalg.norm(x, axis=-1, keepdims=True), dtype)
             h = jnp.asarray(0.4, dtype)
             cases = {}
             for name, cs in kernels(dtype).items():
-                fn = strang_run(cs, n, b > 1)
+                fn = strang_run(cs, n)
                 jax.block_until_ready(fn(x, h))
                 cases[name] = ready(fn, x, h)
             log(f"{np.dtype(dtype).name} {layout}: timing {len(cases)} kernels")
             times = interleaved(cases, repeats)
             base = "general (XLA cos + sin)"
             for name, cs in kernels(dtype).items():
-                limit = float(name.split("L = ")[1]) if "L = " in name else 1.0
+                limit = float(name.split("L = ")[1]) if "L = " in name else 20.0
                 ns = statistics.median(times[name]) / (2 * n * b) * 1e9
                 ratio = statistics.median(a / g for a, g in zip(times[name], times[base]))
                 rows.append({"dtype": np.dtype(dtype).name, "layout": layout, "kernel": name, "terms": cs.terms,
@@ -146,7 +147,7 @@ def main(argv=None):
     out["rows"] = rows
     lines = header(out, "Rotation kernels (`benchmarks/kernel.py`)")
     lines += [("Time per rotation inside a Strang run (median of interleaved rounds) and its ratio to the general "
-              "kernel in the same round; accuracy over |θ| <= L (general: over |θ| <= 1) in units of the dtype's "
+              "kernel in the same round; accuracy over |θ| <= L (general and the library's: over |θ| <= 20) in units of the dtype's "
               "eps."), "",
               ("| dtype | layout | kernel | polynomial terms | ns / rotation | × general | cos error | sin error "
               "| cos²+sin²−1 |"), "|---|---|---|---|---|---|---|---|---|"]
@@ -155,9 +156,7 @@ def main(argv=None):
                      f"| {r['time_vs_general']:.2f} | {r['cos_ulps']:.2f} | {r['sin_ulps']:.2f} | "
                      f"{r['circle_ulps']:.2f} |")
     out["wall_s"] = time.perf_counter() - start
-    lines += ["", (f"Total wall time {out['wall_s']:.0f} s. Library: the economized polynomials of the half angle "
-              f"(for L/2), with the smallest L of {', '.join(f'{L:g}' for L in so3.POLYNOMIAL_LIMITS)} above the run's "
-              "angle bound.")]
+    lines += ["", f"Total wall time {out['wall_s']:.0f} s. Library: `so3.cos_sin` (any angle)."]
     write("kernel", quick, out, lines)
 
 

@@ -46,7 +46,7 @@ def states(b):
 def free_body(scheme, b):
     body = jaxsplit.RigidBody(jnp.asarray(jaxsplit.STANDARD_CASE.inertia))
     x0, h = states(b), 0.5
-    step = jaxsplit.splitting(body, scheme, "casimir").for_run(x0, h)
+    step = jaxsplit.splitting(body, scheme, "casimir")
     n = max(20, int(WORK / b / step.flows_per_step))
     return f"{b} free bodies, {scheme_label(scheme)}, {n:,} steps", (lambda x: jaxsplit.integrate(step, x, h, n).final), (x0,)
 
@@ -108,7 +108,7 @@ def main():
          "dispatched kernel per fused operation per step, unless the process-wide small-loop pass takes it: "
          "'XLA small loops' above). 'One kernel': tagged where the state is at most "
          f"{LIMIT / 1024:g} KiB (`ONE_KERNEL_BYTES`) and its arguments at least "
-         f"{_one_kernel.ONE_KERNEL_FROM_BYTES / 1024:g} KiB (`ONE_KERNEL_FROM_BYTES`); 'tagged': the compiled program "
+         "any size (decided at lowering); 'tagged': the compiled program "
          "carries jaxsplit's tag; 'XLA's pass': XLA's own process-wide small-loop pass made a loop of the "
          "untagged program one kernel (the stepping loop itself where the speed-up is 1.00×; a processor's short "
          "loops otherwise). Difference: largest |difference| between the two "

@@ -42,7 +42,7 @@ def cases():
                          (256, "kahan-li-8", 1000), (4096, "mclachlan-ss15", 50), (10**4, "strang", 500),
                          (10**5, "strang", 50)):
         x = states(b) if b > 1 else jnp.asarray(jaxsplit.STANDARD_CASE.m0)
-        step = jaxsplit.splitting(body, scheme, "casimir").for_run(x, 0.4)
+        step = jaxsplit.splitting(body, scheme, "casimir")
         label = "one body" if b == 1 else f"{b:,} bodies"
         out[f"{label}, {jaxsplit.schemes[scheme].name}, {n:,} steps"] = (
             lambda y, step=step, n=n: step.advance(y, 0.4, n), (x,))
@@ -50,7 +50,7 @@ def cases():
     for b, n in ((1, 20_000), (1000, 200)):
         x = (states(b, 1) if b > 1 else jnp.array([0.3, -0.2, 1.1]), jnp.broadcast_to(jnp.array([0.1, 0.2, 0.97]), (b, 3)) if b > 1
              else jnp.array([0.1, 0.2, 0.97]))
-        step = jaxsplit.splitting(top, "strang").for_run(x, 0.01)
+        step = jaxsplit.splitting(top, "strang")
         loss = lambda y, step=step, n=n: jnp.sum(jaxsplit.integrate(step, y, 0.01, n, adjoint="reversible").final[0])
         label = "one heavy top" if b == 1 else f"{b:,} heavy tops"
         out[f"{label}, Strang, {n:,} steps"] = (lambda y, step=step, n=n: step.advance(y, 0.01, n), (x,))

@@ -5,10 +5,12 @@ Two bodies: the standard I = (2, 1, 2/3) and the near-symmetric I = (1, 1.01, 0.
 random unit states integrated together (one (256, 3) state for every method: a shared step
 for the adaptive ones, whose error control then watches the worst body). Error = max over
 bodies of |m(T) − reference|, the reference by Kahan–Li 10 with sub-step angles <= 0.01.
-Work = wall time of one call (median of interleaved rounds): jaxsplit as a user calls
-``integrate`` (dispatch included), diffrax behind ``jax.jit`` with the tolerance or step
-traced and jaxsplit's compiler options (``jaxsplit.compiler_options()``, 512-bit vectors: the
-same code generation for both; ``vector_width.py``: diffrax's Dopri8 gains 1.1× from it), scipy ``solve_ivp`` on the 768 components. Time to reach 1e-6 and 1e-8 is
+Work = wall time of one call (median of interleaved rounds), in two idioms for both JAX
+libraries: the batch as one (256, 3) state (jaxsplit's ``integrate`` called directly,
+dispatch included; diffrax behind ``jax.jit`` with the tolerance or step traced) and the
+user's ``jax.jit(jax.vmap(...))`` over single states (each body then has its own adaptive
+step in diffrax); both compiled with XLA's defaults. scipy ``solve_ivp`` on the 768
+components. Time to reach 1e-6 and 1e-8 is
 interpolated log-log between measured points; ``auto`` is ``jaxsplit.auto_splitting``'s
 choice for that tolerance (its pilot time reported apart).
 
@@ -50,9 +52,6 @@ SPLITTINGS = {  # step counts over T = 10³ (h = 10³/n), bracketing 1e-6 and 1e
     "blanes-moan-s6-prk": (2560, 5000, 10000, 20000, 40000, 80000), "strang": (16000, 64000, 256000)}
 
 
-OPTIONS = jaxsplit.compiler_options() or None  # diffrax compiled as jaxsplit's own programs are
-
-
 def states():
     m = np.random.default_rng(0).standard_normal((256, 3))
     return m / np.linalg.norm(m, axis=1, keepdims=True)
@@ -64,13 +63,20 @@ def reference(body, m0):
     return np.asarray(jaxsplit.integrate(step, m0, T_END / n, n).final)
 
 
+VMAP = ", jit(vmap)"  # the method label's suffix for the user's idiom
+
+
 def jaxsplit_cases(body, m0, quick):
     cases = []
     for scheme, counts in SPLITTINGS.items():
         step = jaxsplit.splitting(body, scheme, "casimir")
         for n in counts[::2] if quick else counts:
+            run = lambda m, step=step, n=n: jaxsplit.integrate(step, m, T_END / n, n).final
+            mapped = jax.jit(jax.vmap(run))
             cases.append((f"jaxsplit {scheme_label(scheme)}, Casimir split", f"n = {n}",
-                          lambda step=step, n=n: jaxsplit.integrate(step, m0, T_END / n, n).final.block_until_ready()))
+                          lambda run=run: run(m0).block_until_ready()))
+            cases.append((f"jaxsplit {scheme_label(scheme)}, Casimir split{VMAP}", f"n = {n}",
+                          lambda f=mapped: f(m0).block_until_ready()))
     return cases
 
 
@@ -79,23 +85,23 @@ def diffrax_cases(body, m0, quick):
     cases = []
     solvers = {"Tsit5": (diffrax.Tsit5(), 5), "Dopri5": (diffrax.Dopri5(), 5), "Dopri8": (diffrax.Dopri8(), 8)}
     for name, (solver, order) in solvers.items():
-        @jax.jit(compiler_options=OPTIONS)
         def adaptive(y0, tol, solver=solver):
             controller = diffrax.PIDController(rtol=tol, atol=tol)
             return diffrax.diffeqsolve(term, solver, 0.0, T_END, None, y0, stepsize_controller=controller,
                                        max_steps=10**6).ys[-1]
 
-        for tol in ((1e-7, 1e-9, 1e-11) if quick else (1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11)):
-            cases.append((f"diffrax {name} (PID)", f"tol = {tol:.0e}",
-                          lambda f=adaptive, tol=tol: f(m0, jnp.asarray(tol)).block_until_ready()))
+        for idiom, f in (("", jax.jit(adaptive)), (VMAP, jax.jit(jax.vmap(adaptive, in_axes=(0, None))))):
+            for tol in ((1e-7, 1e-9, 1e-11) if quick else (1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11)):
+                cases.append((f"diffrax {name} (PID){idiom}", f"tol = {tol:.0e}",
+                              lambda f=f, tol=tol: f(m0, jnp.asarray(tol)).block_until_ready()))
         counts = (4000, 8000, 16000, 32000) if order == 5 else (1000, 2000, 4000, 8000)
         for n in counts[::2] if quick else counts:
-            @jax.jit(compiler_options=OPTIONS)
             def fixed(y0, dt, solver=solver, n=n):
                 return diffrax.diffeqsolve(term, solver, 0.0, T_END, dt, y0, max_steps=n + 1).ys[-1]
 
-            cases.append((f"diffrax {name} (fixed)", f"n = {n}",
-                          lambda f=fixed, n=n: f(m0, jnp.asarray(T_END / n)).block_until_ready()))
+            for idiom, f in (("", jax.jit(fixed)), (VMAP, jax.jit(jax.vmap(fixed, in_axes=(0, None))))):
+                cases.append((f"diffrax {name} (fixed){idiom}", f"n = {n}",
+                              lambda f=f, n=n: f(m0, jnp.asarray(T_END / n)).block_until_ready()))
     return cases
 
 
@@ -148,9 +154,11 @@ def summary(rows, auto, label):
                  for t in TARGETS} for m in methods}
     best = {}
     for family in ("jaxsplit", "diffrax", "scipy"):
-        for t in TARGETS:
-            options = [(v[t], m) for m, v in reach.items() if m.startswith(family) and v[t] is not None]
-            best[family, t] = min(options) if options else (None, None)
+        for idiom in ("batch", "vmap"):
+            for t in TARGETS:
+                options = [(v[t], m) for m, v in reach.items() if m.startswith(family) and v[t] is not None
+                           and m.endswith(VMAP) == (idiom == "vmap")]
+                best[family, idiom, t] = min(options) if options else (None, None)
     return reach, best
 
 
@@ -159,13 +167,14 @@ def plot(rows, path):
     fig, axes = plt.subplots(1, len(labels), figsize=(13, 5), constrained_layout=True, sharey=True)
     styles = {"jaxsplit": "-o", "diffrax": "--^", "scipy": ":s"}
     for ax, label in zip(axes, labels):
-        for method in dict.fromkeys(r["method"] for r in rows if r["body"] == label):
+        for method in dict.fromkeys(r["method"] for r in rows if r["body"] == label
+                                    and (r["method"].endswith(VMAP) or r["method"].startswith("scipy"))):
             pts = sorted((r["time_s"], max(r["error"], 1e-16)) for r in rows if r["body"] == label and r["method"] == method)
             color = "black" if method.startswith("scipy") else None  # the 11th line would repeat a colour
             ax.loglog(*zip(*pts), styles[method.split()[0]], label=method, ms=4, lw=1.2, color=color)
         for t in TARGETS:
             ax.axhline(t, color="grey", lw=0.6, ls=":")
-        ax.set_title(f"{label}, 256 bodies, T = 1000")
+        ax.set_title(f"{label}, 256 bodies, T = 1000, jit(vmap(...))")
         ax.set_xlabel("wall time per run [s]")
         ax.grid(True, which="both", alpha=0.3)
     axes[0].set_ylabel("max error at T = 1000 over the 256 bodies")
@@ -193,19 +202,21 @@ def main(argv=None):
               "not bracketed) for the best configuration of each family, and the speed-up of the best jaxsplit "
               "configuration over the best diffrax one. Plot: `work_precision.png`; every point in "
               "`work_precision.json`."), "",
-              "| body | error | best jaxsplit | best diffrax | scipy DOP853 | jaxsplit speed-up over diffrax |",
-              "|---|---|---|---|---|---|"]
+              "| body | error | idiom | best jaxsplit | best diffrax | scipy DOP853 | jaxsplit speed-up over diffrax |",
+              "|---|---|---|---|---|---|---|"]
     out["speedups"] = {}
     for label in BODIES:
         _, best = summary(rows, auto, label)
         for t in TARGETS:
-            (tj, mj), (td, md), (ts, _) = best["jaxsplit", t], best["diffrax", t], best["scipy", t]
-            ratio = td / tj if tj and td else None
-            out["speedups"][f"{label}, {t:.0e}"] = ratio
-            cell = lambda v, m: "—" if v is None else f"{v * 1e3:.3g} ms ({m})"
-            lines.append(f"| {label} | {t:.0e} | {cell(tj, mj)} | {cell(td, md)} | "
-                         f"{'—' if ts is None else f'{ts * 1e3:.3g} ms'} | "
-                         f"{'—' if ratio is None else f'**{ratio:.2g}×**'} |")
+            for idiom, name in (("vmap", "`jit(vmap(...))`, both"), ("batch", "batched state, both")):
+                (tj, mj), (td, md) = best["jaxsplit", idiom, t], best["diffrax", idiom, t]
+                ts = best["scipy", "batch", t][0]
+                ratio = td / tj if tj and td else None
+                out["speedups"][f"{label}, {t:.0e}, {idiom}"] = ratio
+                cell = lambda v, m: "—" if v is None else f"{v * 1e3:.3g} ms ({m.removesuffix(VMAP)})"
+                lines.append(f"| {label} | {t:.0e} | {name} | {cell(tj, mj)} | {cell(td, md)} | "
+                             f"{'—' if ts is None else f'{ts * 1e3:.3g} ms'} | "
+                             f"{'—' if ratio is None else f'**{ratio:.2g}×**'} |")
     lines += ["", ("`auto_splitting`'s choice per tolerance (run time; the pilot that chose it, once per body and "
               "tolerance, apart):"), "", "| body | tol | choice | steps | error reached | run | pilot |",
               "|---|---|---|---|---|---|---|"]
