@@ -66,7 +66,9 @@ def turn(x, omega):
     s, c = jnp.sin(phi / 2), jnp.cos(phi / 2)
     s_phi = (s + s) / phi
     wx = jnp.cross(omega, x)
-    return x + (s_phi * c) * wx + (0.5 * s_phi * s_phi) * jnp.cross(omega, wx)
+    # the increment first, then one addition: one rounding at the size of x (|S_i| is a random
+    # walk of these roundings over a long run; two additions made it √2 larger)
+    return x + ((s_phi * c) * wx + (0.5 * s_phi * s_phi) * jnp.cross(omega, wx))
 
 
 def as_sites(x, n_sites: int):
