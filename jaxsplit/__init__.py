@@ -95,6 +95,8 @@ if typing.TYPE_CHECKING:
     from .explore._tune import order4_coefficients as order4_coefficients
     from .explore._tune import random_bodies as random_bodies
     from .explore._tune import tune_scheme as tune_scheme
+    from .measure._structure_factor import StructureFactor as StructureFactor
+    from .measure._structure_factor import structure_factor as structure_factor
     from .paper import audit_paper as audit_paper
     from .systems._attitude import Attitude as Attitude
     from .systems._attitude import attitude as attitude

@@ -304,12 +304,21 @@ class SpinLattice(AbstractSystem):
         v = jnp.asarray(v / np.linalg.norm(v, axis=-1, keepdims=True), dtype=dtype or jnp.result_type(float))
         return self._lengths(v.dtype) * v
 
-    def perturbed(self, state, amplitude: float, seed: int = 0):
-        """``state`` with each spin turned by a random angle vector of size ~``amplitude``
-        (radians, Gaussian components): lengths kept exactly."""
+    def perturbed(self, state, amplitude: float, seed: int = 0, zero_mean: bool = False):
+        """``state`` with each spin turned by a small random angle (Gaussian tangent increments
+        of size ~``amplitude`` radians): lengths kept exactly. ``zero_mean``: the increments'
+        sum removed (to first order the total magnetisation is that of ``state``; a net
+        moment would make a whole ordered state precess, splitting its spin-wave peaks)."""
         s = self.sites(state)
-        omega = np.random.default_rng(seed).normal(scale=float(amplitude), size=(self.n_sites, 3))
-        return turn(s, jnp.asarray(omega, s.dtype)).reshape(jnp.shape(state))
+        a = np.asarray(s, dtype=float)
+        unit = a / np.linalg.norm(a, axis=-1, keepdims=True)
+        delta = np.random.default_rng(seed).normal(scale=float(amplitude), size=a.shape)
+        for _ in range(4 if zero_mean else 1):  # onto the tangent planes, mean removed
+            delta = delta - unit * np.sum(unit * delta, axis=-1, keepdims=True)
+            if zero_mean:
+                delta = delta - np.mean(delta, axis=0)
+        delta = delta - unit * np.sum(unit * delta, axis=-1, keepdims=True)
+        return turn(s, jnp.asarray(np.cross(unit, delta), s.dtype)).reshape(jnp.shape(state))
 
     # ------------------------------------------------------------------ splits
     def splits(self):
