@@ -14,7 +14,7 @@ the records and the files (``spins.json``, ``spins.md``, two figures) in memory;
 ``audit_spins`` writes them (``jaxsplit spins-audit``).
 
 Compile cost: each (case, method) compiles one program (a scan of traced-length loops)
-that serves both the long run and the order ladder; the defects run eagerly.
+that serves both the long run and the order ladder, and one for the defects at every h.
 """
 
 import io
@@ -94,7 +94,8 @@ def poisson_column(case, method, seed=0):
     system = _system(case)
     step = _step(system, method)
     x = system.random_state(seed)
-    defects = [float(poisson_defect(step, system, x, h)) for h in DEFECT_STEPS]
+    defect = jax.jit(lambda y, h: poisson_defect(step, system, y, h))  # one compilation, h traced
+    defects = [float(defect(x, h)) for h in DEFECT_STEPS]
     worst = max(defects)
     if not all(map(math.isfinite, defects)):
         verdict = "undecided"
@@ -155,11 +156,8 @@ def run_columns(case, method, reference):
             "order": {"steps": hs, "errors": errors, "order": order}}
 
 
-def run_spins_audit(cases=None, methods=None, *, figures: bool = True) -> tuple[list[dict], dict]:
-    """Run the audit (module docstring); return (records, {file name: bytes}), ``spins.json`` last.
-    Needs float64. Writes nothing."""
-    if not jax.config.jax_enable_x64:
-        raise InputError("the spin audit measures at float64 round-off: enable jax_enable_x64 first")
+def check_names(cases=None, methods=None) -> tuple[tuple, tuple]:
+    """(cases, methods), all by default; unknown names refused (one line)."""
     cases = tuple(CASES) if cases is None else tuple(cases)
     methods = METHODS if methods is None else tuple(methods)
     for c in cases:
@@ -168,6 +166,17 @@ def run_spins_audit(cases=None, methods=None, *, figures: bool = True) -> tuple[
     for m in methods:
         if m not in METHODS:
             raise InputError(f"unknown method {m!r}; choose from {', '.join(METHODS)}")
+    if not cases or not methods:
+        raise InputError("name at least one case and one method (or none for all)")
+    return cases, methods
+
+
+def run_spins_audit(cases=None, methods=None, *, figures: bool = True) -> tuple[list[dict], dict]:
+    """Run the audit (module docstring); return (records, {file name: bytes}), ``spins.json`` last.
+    Needs float64. Writes nothing."""
+    if not jax.config.jax_enable_x64:
+        raise InputError("the spin audit measures at float64 round-off: enable jax_enable_x64 first")
+    cases, methods = check_names(cases, methods)
     records = []
     for case in cases:
         reference = _reference(case)
@@ -231,7 +240,8 @@ def _figures(records) -> dict:
     cases = list(dict.fromkeys(r["case"] for r in records))
     out = {}
     for name, draw in (("spins_defect.png", _draw_defects), ("spins_energy.png", _draw_energy)):
-        fig, axes = plt.subplots(1, len(cases), figsize=(4.2 * len(cases), 3.6), squeeze=False)
+        fig, axes = plt.subplots(1, len(cases), figsize=(4.4 * len(cases), 3.6), squeeze=False,
+                                 gridspec_kw={"wspace": 0.35})
         for ax, case in zip(axes[0], cases):
             draw(ax, [r for r in records if r["case"] == case])
             ax.set_title(case, fontsize=9)
@@ -247,8 +257,16 @@ def _draw_defects(ax, rows):
     for r in rows:
         ax.loglog(r["poisson"]["steps"], np.maximum(r["poisson"]["defects"], 1e-17), "o-", ms=3, label=r["method"])
     ax.axhline(ROUND_OFF, color="k", lw=0.6, ls=":")
+    ax.set_xticks(DEFECT_STEPS, [f"{h:g}" for h in DEFECT_STEPS])
+    ax.xaxis.set_minor_formatter(_null_formatter())
     ax.set_xlabel("h")
     ax.set_ylabel("Poisson defect (jacfwd)")
+
+
+def _null_formatter():
+    import matplotlib.ticker
+
+    return matplotlib.ticker.NullFormatter()
 
 
 def _draw_energy(ax, rows):
