@@ -27,6 +27,7 @@ AREAS = {  # package -> (title, one line on what it owns)
     "classical": ("Classical methods", "Runge–Kutta methods and Ruth's method on any PyTree state."),
     "explore": ("Exploration", "Sweeps, stability maps, fitting and tuning over families of systems."),
     "paper": ("Paper audit", "The seed paper's claims re-derived numerically."),
+    "measure": ("Measurements", "The dynamical structure factor S(q, ω) of spin trajectories."),
 }
 
 

@@ -80,13 +80,18 @@ def spin_figure(system, t, states, energy, magnet, parameters, summary) -> bytes
                   extent=(-0.5, len(idx) - 0.5, sqw.omega[keep][0], sqw.omega[keep][-1]))
         q = sqw.q[tuple(idx.T)]
         curve = spin_wave_curve(parameters, q)
+        nyquist = float(np.pi / (t[1] - t[0]))
+        note = ""
         if curve is not None:
             ax.plot(np.arange(len(idx)), curve, "c--", lw=1.0, label="linear spin waves")
             ax.legend(fontsize=8, loc="upper right")
             ax.set_ylim(0, min(sqw.omega[keep][-1], 1.3 * max(float(np.max(curve)), sqw.resolution * 4)))
+            if np.max(curve) > nyquist:
+                note = f"\naliased: ω reaches {np.max(curve):.2g} > π/Δt = {nyquist:.2g}; lower --save-every"
+                summary["aliased"] = True
         ax.set_xticks(ticks, labels)
         ax.set_ylabel("ω")
-        ax.set_title(f"log10 S(q, ω) (Δω = {sqw.resolution:.2g})", fontsize=9)
+        ax.set_title(f"log10 S(q, ω) (Δω = {sqw.resolution:.2g}){note}", fontsize=9)
     else:
         ax.text(0.5, 0.5, f"S(q, ω) needs >= {FREQUENCY_POINTS} saved states\n(lower --save-every)",
                 ha="center", va="center")
@@ -114,12 +119,14 @@ def _spin_map(fig, ax, lat, s):
         layer = np.isclose(pos[:, 2], pos[:, 2].min())
         pos, spins = pos[layer], s[layer]
     scale = np.max(np.linalg.norm(s, axis=-1))
-    sc = ax.scatter(pos[:, 0], pos[:, 1], c=spins[:, 2] / scale, cmap="coolwarm", vmin=-1, vmax=1,
-                    s=max(2.0, 2000.0 / len(pos)))
-    if len(pos) <= 4096:
+    k = int(np.argmax(np.std(spins, axis=0)))  # the component that varies most shows the texture
+    limit = max(float(np.max(np.abs(spins[:, k]))) / scale, 1e-3)
+    sc = ax.scatter(pos[:, 0], pos[:, 1], c=spins[:, k] / scale, cmap="coolwarm", vmin=-limit, vmax=limit,
+                    s=max(2.0, 2000.0 / len(pos)), marker="s")
+    if len(pos) <= 1024:
         ax.quiver(pos[:, 0], pos[:, 1], spins[:, 0], spins[:, 1], angles="xy", scale_units="xy",
                   scale=2 * scale, width=0.002)
     ax.set_aspect("equal")
-    fig.colorbar(sc, ax=ax, label="S_z / S")
-    ax.set_title("final spins: S_z (colour), in-plane part (arrows)" + (", layer z = 0" if lat.dimension == 3 else ""),
-                 fontsize=9)
+    fig.colorbar(sc, ax=ax, orientation="horizontal", fraction=0.05, pad=0.08, label=f"S_{'xyz'[k]} / S")
+    ax.set_title(f"final spins: S_{'xyz'[k]} (colour)" + (", in-plane part (arrows)" if len(pos) <= 1024 else "")
+                 + (", layer z = 0" if lat.dimension == 3 else ""), fontsize=9)
