@@ -18,8 +18,8 @@ from jaxsplit.lattices._graph import degrees, is_proper, misra_gries
 ROUND_OFF = 1e-13  # acceptance: Poisson defect and |S_i| drift at float64 round-off
 ORDER_SLACK = 0.3  # acceptance: measured order within 0.3 of nominal
 
-ALL_TERMS = dict(exchange=0.8, anisotropic=0.3, dm=(0.2, -0.1, 0.35), anisotropy=0.4, axis=(1.0, 1.0, 1.0),
-                 field=(0.1, -0.2, 0.3))
+ALL_TERMS = {"exchange": 0.8, "anisotropic": 0.3, "dm": (0.2, -0.1, 0.35), "anisotropy": 0.4,
+             "axis": (1.0, 1.0, 1.0), "field": (0.1, -0.2, 0.3)}
 
 
 # ------------------------------------------------------------------ geometry

@@ -28,8 +28,19 @@ from typing import NamedTuple
 import numpy as np
 
 from ..core._errors import InputError
-from . import _args, _bounds, _chunked, _data, _diagnostics, _io, _metadata, _problem, _progress, _signals
-from . import _spin_simulate
+from . import (
+    _args,
+    _bounds,
+    _chunked,
+    _data,
+    _diagnostics,
+    _io,
+    _metadata,
+    _problem,
+    _progress,
+    _signals,
+    _spin_simulate,
+)
 
 EXIT_OK = 0
 EXIT_NONFINITE = 3

@@ -94,9 +94,9 @@ def check_bonds(n_sites: int, bonds) -> np.ndarray:
         arr = arr.reshape(0, 2)
     if arr.ndim != 2 or arr.shape[1] != 2:
         raise InputError(f"bonds must be a (B, 2) array of site pairs, got shape {arr.shape}")
-    if not np.issubdtype(arr.dtype, np.integer):
-        if not (np.issubdtype(arr.dtype, np.floating) and np.all(arr == np.round(arr))):
-            raise InputError(f"bonds must be integer site indices, got dtype {arr.dtype}")
+    if not np.issubdtype(arr.dtype, np.integer) and not (
+            np.issubdtype(arr.dtype, np.floating) and np.all(arr == np.round(arr))):
+        raise InputError(f"bonds must be integer site indices, got dtype {arr.dtype}")
     arr = arr.astype(np.int64)
     bad = (arr < 0) | (arr >= n_sites)
     if np.any(bad):
@@ -129,7 +129,7 @@ def misra_gries(n_sites: int, bonds) -> tuple:
     bonds = np.asarray(bonds, dtype=np.int64)
     delta = int(np.max(degrees(n_sites, bonds), initial=0))
     palette = range(delta + 1)
-    at = [dict() for _ in range(n_sites)]  # site -> {colour: neighbour}
+    at = [{} for _ in range(n_sites)]  # site -> {colour: neighbour}
     colour_of = {}  # (min, max) -> colour
 
     def key(u, v):

@@ -26,8 +26,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..checks._poisson import growth_exponent, poisson_defect
 from ..checks._order import fit_order
+from ..checks._poisson import growth_exponent, poisson_defect
 from ..core._errors import InputError
 from ..lattices import lattice
 from ..systems._spin_integrators import heun, spherical_midpoint
@@ -38,10 +38,10 @@ from ._records import ROUND_OFF, STRUCTURE_FLOOR
 
 # name -> (lattice name, size, periodic, couplings): N <= 16, three geometries, all terms
 CASES = {
-    "ring-6": ("chain", 6, True, dict(exchange=1.0)),
-    "square-4x4": ("square", 4, True, dict(exchange=-1.0, anisotropic=0.2, field=(0.0, 0.0, 0.3))),
-    "honeycomb-2x2": ("honeycomb", 2, True, dict(exchange=0.8, dm=(0.1, 0.2, 0.3), anisotropy=0.3,
-                                                 axis=(0.0, 0.6, 0.8), field=(0.2, 0.0, 0.1))),
+    "ring-6": ("chain", 6, True, {"exchange": 1.0}),
+    "square-4x4": ("square", 4, True, {"exchange": -1.0, "anisotropic": 0.2, "field": (0.0, 0.0, 0.3)}),
+    "honeycomb-2x2": ("honeycomb", 2, True, {"exchange": 0.8, "dm": (0.1, 0.2, 0.3), "anisotropy": 0.3,
+                                             "axis": (0.0, 0.6, 0.8), "field": (0.2, 0.0, 0.1)}),
 }
 METHODS = ("bonds", "sublattice", "sweep", "spherical-midpoint", "heun")
 DEFECT_STEPS = (0.2, 0.1, 0.05, 0.025)
@@ -215,11 +215,11 @@ def _g(x, digits=2):
 
 def _report(records) -> str:
     lines = ["# Spin integrators audited", "",
-             "Strang on each split; the implicit and explicit methods as they are. Defects by `jacfwd` at "
-             f"h = {', '.join(map(str, DEFECT_STEPS))}; runs to T = {RUN_STEP * RUN_BLOCKS * RUN_PER_BLOCK:g} at "
-             f"h = {RUN_STEP}; order at T = {ORDER_T:g} against Kahan–Li 8 on the exact bond flows.", "",
-             "| case | N | method | max Poisson defect | defect ∝ h^p | verdict | energy error (rel.) | drift·T "
-             "| energy | max ‖S_i‖ error | magnetisation error | order |",
+             ("Strang on each split; the implicit and explicit methods as they are. Defects by `jacfwd` at "
+              f"h = {', '.join(map(str, DEFECT_STEPS))}; runs to T = {RUN_STEP * RUN_BLOCKS * RUN_PER_BLOCK:g} at "
+              f"h = {RUN_STEP}; order at T = {ORDER_T:g} against Kahan–Li 8 on the exact bond flows."), "",
+             ("| case | N | method | max Poisson defect | defect ∝ h^p | verdict | energy error (rel.) | drift·T "
+              "| energy | max ‖S_i‖ error | magnetisation error | order |"),
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in records:
         m = r["magnetisation"]

@@ -36,7 +36,7 @@ class StaticIndex:
     """A NumPy integer array as a hashable static value (compared by content): a flow's site
     indices become constants of the compiled program."""
 
-    __slots__ = ("array", "_key")
+    __slots__ = ("_key", "array")
 
     def __init__(self, array):
         self.array = np.asarray(array, dtype=np.int32)

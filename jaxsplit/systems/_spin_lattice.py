@@ -39,7 +39,6 @@ Implicit and explicit baselines for any H: ``spherical_midpoint`` and ``heun``
 (``_spin_integrators``).
 """
 
-from collections.abc import Callable
 from typing import ClassVar
 
 import equinox as eqx
@@ -51,8 +50,17 @@ from ..core._errors import InputError
 from ..lattices._graph import Lattice
 from ._base import AbstractSystem
 from ._rigid_body import as_float_array, is_concrete
-from ._spin_flows import BondExchange, BondIsing, FrozenField, SiteRotation, StaticIndex, as_sites, partners, \
-    per_site, turn
+from ._spin_flows import (
+    BondExchange,
+    BondIsing,
+    FrozenField,
+    SiteRotation,
+    StaticIndex,
+    as_sites,
+    partners,
+    per_site,
+    turn,
+)
 from ._validate import _show
 
 SWEEP_MAX_SITES = 256  # one flow per site: beyond this the compile time, not the run, dominates
