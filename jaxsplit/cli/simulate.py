@@ -69,6 +69,8 @@ examples:
   jaxsplit simulate --dtype float32 --renormalize --scheme kahan-li-6 --steps 1e5
   jaxsplit simulate --json --no-save                  # one JSON object, no files
   jaxsplit simulate --dt -0.01 --steps 100            # backwards in time
+  jaxsplit simulate --system spin-lattice --lattice square --size 64x64 --exchange 1 --field 0,0,0.1 \
+                    --dt 0.1 --steps 2000 --save-every 2 --out square.npz   # spin waves: S(q,w) figure
 
 --save-at @FILE reads the times from FILE, one per line.
 
