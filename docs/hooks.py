@@ -31,7 +31,8 @@ AREAS = {  # package -> (title, one line on what it owns)
     "classical": ("Classical methods", "Runge–Kutta methods and Ruth's method on any PyTree state."),
     "explore": ("Exploration", "Sweeps, stability maps, fitting and tuning over families of systems."),
     "paper": ("Paper audit", "The seed paper's claims re-derived numerically."),
-    "tuning": ("Tuning", "Compiler settings of jaxsplit's own programs on the CPU (the command line applies them)."),
+    "measure": ("Measurements", "The dynamical structure factor S(q, ω) of spin trajectories."),
+    "tuning": ("Tuning", "XLA's CPU settings, as explicit calls (importing jaxsplit changes none; the command line applies them)."),
 }
 # name -> the public name it is documented beside: ``splitting`` builds a ``Composition`` from a
 # system's flows (it lives in ``systems`` because it asks the system for its split)

@@ -24,6 +24,7 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 if typing.TYPE_CHECKING:
+    from . import lattices as lattices
     from . import systems as systems
     from ._xla_cpu import compiler_options as compiler_options
     from ._xla_cpu import tune_cpu as tune_cpu
@@ -94,6 +95,8 @@ if typing.TYPE_CHECKING:
     from .explore._tune import order4_coefficients as order4_coefficients
     from .explore._tune import random_bodies as random_bodies
     from .explore._tune import tune_scheme as tune_scheme
+    from .measure._structure_factor import StructureFactor as StructureFactor
+    from .measure._structure_factor import structure_factor as structure_factor
     from .paper import audit_paper as audit_paper
     from .systems._attitude import Attitude as Attitude
     from .systems._attitude import attitude as attitude
@@ -116,6 +119,10 @@ if typing.TYPE_CHECKING:
     from .systems._rigid_body import STANDARD_CASE as STANDARD_CASE
     from .systems._rigid_body import RigidBody as RigidBody
     from .systems._rigid_body import symmetric_solution as symmetric_solution
+    from .systems._spin_integrators import heun as heun
+    from .systems._spin_integrators import spherical_midpoint as spherical_midpoint
+    from .systems._spin_lattice import SpinLattice as SpinLattice
+    from .systems._spin_lattice import spin_lattice as spin_lattice
     from .systems._splitting import splitting as splitting
     from .systems.so3 import AxisRotation as AxisRotation
     from .systems.so3 import VectorRotation as VectorRotation

@@ -23,7 +23,7 @@ import sys
 from .._errors import InputError
 from . import _args, _signals
 
-COMMANDS = ("simulate", "schemes", "check", "sweep", "fit", "paper")
+COMMANDS = ("simulate", "schemes", "check", "sweep", "fit", "paper", "spins-audit")
 
 DESCRIPTION = ("jaxsplit: structure-preserving (Poisson / symplectic) splitting integrators for rigid "
                "bodies (free, with attitude, heavy top, gravity gradient), in JAX.")
@@ -54,7 +54,7 @@ class _Parser(argparse.ArgumentParser):
 
 def _load(name):
     """The subcommand module, or None when it is not installed (yet)."""
-    module_name = f"{__name__}.{name}"
+    module_name = f"{__name__}.{name.replace('-', '_')}"
     try:
         return importlib.import_module(module_name)
     except ModuleNotFoundError as err:

@@ -28,7 +28,19 @@ from typing import NamedTuple
 import numpy as np
 
 from ..core._errors import InputError
-from . import _args, _bounds, _chunked, _data, _diagnostics, _io, _metadata, _problem, _progress, _signals
+from . import (
+    _args,
+    _bounds,
+    _chunked,
+    _data,
+    _diagnostics,
+    _io,
+    _metadata,
+    _problem,
+    _progress,
+    _signals,
+    _spin_simulate,
+)
 
 EXIT_OK = 0
 EXIT_NONFINITE = 3
@@ -57,6 +69,8 @@ examples:
   jaxsplit simulate --dtype float32 --renormalize --scheme kahan-li-6 --steps 1e5
   jaxsplit simulate --json --no-save                  # one JSON object, no files
   jaxsplit simulate --dt -0.01 --steps 100            # backwards in time
+  jaxsplit simulate --system spin-lattice --lattice square --size 64x64 --exchange 1 --field 0,0,0.1 \
+                    --dt 0.1 --steps 2000 --save-every 2 --out square.npz   # spin waves: S(q,w) figure
 
 --save-at @FILE reads the times from FILE, one per line.
 
@@ -79,6 +93,7 @@ def add_parser(sub):
         epilog=EXAMPLES + "\n" + _args.EXIT_CODES_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     g = p.add_argument_group("problem")
     _problem.add_system_arguments(g)
+    _spin_simulate.add_arguments(p, g)
     g = p.add_argument_group("method")
     g.add_argument("--scheme", default=None, help="any name from `jaxsplit schemes` (default lie-trotter)")
     _problem.add_split_arguments(g)
@@ -236,6 +251,8 @@ def _bytes_per_saved(prob) -> int:
 
 
 def run(args):
+    if args.system == "spin-lattice" or any(getattr(args, d, None) is not None for d in _spin_simulate.OWN):
+        return _spin_simulate.run(args)
     with _io.Outputs(force=args.force) as outputs:
         return _run(args, outputs)
 

@@ -11,7 +11,9 @@ exact solution for any inertia, on the JAX elliptic functions of ``_elliptic``),
 ``_splitting`` (``splitting``: system + scheme -> step), ``_auto`` (``auto_splitting``: the
 cheapest scheme, split and step for a tolerance), ``_validate`` (one-line errors for bad
 concrete parameters and states: ``check_state`` of the spinning-body systems), ``so3``
-(rotations, quaternions, rotation flows that turn declared parts of a state).
+(rotations, quaternions, rotation flows that turn declared parts of a state), ``_spin_lattice``
+(classical spins on a lattice or bond graph, split into the exact bond and site flows of
+``_spin_flows``) with the baselines of ``_spin_integrators`` (spherical midpoint, Heun).
 """
 
 from . import so3 as so3
@@ -33,6 +35,10 @@ from ._rigid_body import RigidBody as RigidBody
 from ._rigid_body import symmetric_solution as symmetric_solution
 from ._spin import Commuting as Commuting
 from ._spin import MomentumSpin as MomentumSpin
+from ._spin_integrators import heun as heun
+from ._spin_integrators import spherical_midpoint as spherical_midpoint
+from ._spin_lattice import SpinLattice as SpinLattice
+from ._spin_lattice import spin_lattice as spin_lattice
 from ._splitting import splitting as splitting
 
 
