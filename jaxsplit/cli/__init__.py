@@ -70,6 +70,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     parser.add_argument("--version", action="version", version=f"jaxsplit {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    parser.commands = sub
     for name in dict.fromkeys(COMMANDS):
         module = _load(name)
         if module is not None:
@@ -91,12 +92,14 @@ def main(argv=None) -> int:
             if args.command is None:
                 parser.print_help()
                 return 0
+            args.given = _args.given_options(parser, args.command, argv)  # for _args.refuse_unused
             status = args.func(args) or 0
         except InputError as err:
             print(f"jaxsplit: error: {_one_line(err)}", file=sys.stderr)
             return 2
         except _signals.Interrupted as stopped:
-            print(f"jaxsplit: interrupted ({stopped}); nothing was left half-written", file=sys.stderr)
+            if stopped.detail:
+                print(f"jaxsplit: interrupted ({stopped}); {stopped.detail}", file=sys.stderr)
             return _signals.EXIT_INTERRUPTED
         except BrokenPipeError:  # `jaxsplit schemes | head`
             return 0

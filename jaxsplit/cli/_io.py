@@ -112,11 +112,13 @@ class Outputs:
         self._files[p] = what
         return p
 
-    def directory(self, path, what: str) -> Path:
-        """Claim an output directory (created if missing) and lock it: the files inside it
-        are the command's to write."""
+    def directory(self, path, what: str, *, resume: bool = False) -> Path:
+        """Claim an output directory (created if missing; with ``resume`` it must exist) and
+        lock it: the files inside it are the command's to write."""
         shown = os.fspath(path)
         p = resolve(path, what)
+        if resume and not os.path.isdir(p):
+            raise InputError(f"nothing to resume: {what} {shown!r} does not exist; run without --resume to start")
         if os.path.exists(p) and not os.path.isdir(p):
             raise InputError(f"{what} {shown!r} exists and is not a directory")
         for other, other_what in self._dirs.items():

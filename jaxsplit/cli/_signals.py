@@ -43,8 +43,8 @@ STUCK_SECONDS = 0.2  # a signal byte left unread this long: the main thread is i
 class Interrupted(Exception):
     """Raised by ``Policy.check`` at a safe point once a deferred signal has arrived."""
 
-    def __init__(self, signum: int):
-        self.signum = signum
+    def __init__(self, signum: int, detail: str = "nothing was left half-written"):
+        self.signum, self.detail = signum, detail  # detail "": the command already said what it kept
         super().__init__(signal.Signals(signum).name)  # "SIGINT", "SIGTERM"
 
 

@@ -216,9 +216,14 @@ def heavy_top_family(params):
     return HeavyTop(jnp.exp(params["log_inertia"]), params["moment"], 1.0)
 
 
-def heavy_top_start(t, m, gamma):
-    """(1/I, weight·χ) by integral matching: ṁ = m × (w ⊙ m) + Γ × μ and Γ̇ = Γ × (w ⊙ m) are
-    linear in (w, μ); the trapezoid rule over each interval gives a least-squares problem."""
+PARAMETERS = ("1/I1", "1/I2", "1/I3", "weight x centre of mass x", "weight x centre of mass y",
+              "weight x centre of mass z")
+DEGENERATE = 1e-12  # a singular value of the integral-matching system at round-off: exactly undetermined
+
+
+def _matching_system(t, m, gamma):
+    """The integral-matching least squares (lhs (6(n-1), 6), rhs): d(m, Γ)/dt = M (1/I, weight·χ),
+    by the trapezoid rule over each interval."""
     eye = np.eye(3)
 
     def rows(mk, gk):  # (n, 6, 6): d(m, Γ)/dt = M (w, μ)
@@ -232,6 +237,27 @@ def heavy_top_start(t, m, gamma):
     dt = np.diff(t)[:, None, None]
     lhs = (0.5 * dt * (rows(m[:-1], gamma[:-1]) + rows(m[1:], gamma[1:]))).reshape(-1, 6)
     rhs = np.concatenate([np.diff(m, axis=0), np.diff(gamma, axis=0)], axis=1).reshape(-1)
+    return lhs, rhs
+
+
+def _refuse_undetermined(path, t, m, gamma):
+    """Refuse data that leave a parameter exactly undetermined (the fit would print a number for
+    it): a null direction of the integral-matching system, to round-off."""
+    lhs, _ = _matching_system(t, m, gamma)
+    _, sv, vt = np.linalg.svd(lhs / max(np.max(np.abs(lhs)), 1e-300))
+    null = vt[sv <= DEGENERATE * max(sv[0], 1e-300)]
+    if not null.size:
+        return
+    names = [PARAMETERS[k] for k in range(6) if np.any(np.abs(null[:, k]) > 0.1)]
+    why = ("gamma is 0 at every observation (gamma is the unit vertical seen from the body)"
+           if not np.any(gamma) else "gamma(t) and m(t) leave a direction of the parameters free")
+    raise InputError(f"{path}: these data do not determine {', '.join(names)}: {why}; nothing fitted")
+
+
+def heavy_top_start(t, m, gamma):
+    """(1/I, weight·χ) by integral matching: ṁ = m × (w ⊙ m) + Γ × μ and Γ̇ = Γ × (w ⊙ m) are
+    linear in (w, μ); the trapezoid rule over each interval gives a least-squares problem."""
+    lhs, rhs = _matching_system(t, m, gamma)
     theta, *_ = np.linalg.lstsq(lhs, rhs, rcond=None)
     w = theta[:3]
     w = np.where(w > 1e-3 * np.max(np.abs(w)), w, 1e-3 * np.max(np.abs(w)) or 1.0)  # positive moments to start
@@ -261,6 +287,7 @@ def _run_heavy_top(args, t, states, meta, scheme):
     m, gamma = states["m"], states["gamma"]
     if len(t) < 4 or not np.all(np.diff(t) > 0):
         raise InputError("t must be strictly increasing with n >= 4 observations")
+    _refuse_undetermined(args.data, t, m, gamma)
     w0, moment0 = heavy_top_start(t, m, gamma)
     params0 = {"log_inertia": jnp.log(1 / jnp.asarray(w0)), "moment": jnp.asarray(moment0)}
     res = fit(heavy_top_family, t, (m, gamma), params0, fit_x0=not args.fixed_m0, scheme=scheme, split="axes",
