@@ -208,15 +208,23 @@ def test_check_exact_splitting_is_not_a_failure(capsys):
 
 def test_schemes_table_lists_every_registered_scheme(capsys):
     assert main(["schemes"]) == 0
-    lines = capsys.readouterr().out.splitlines()
-    assert lines[0].split()[:4] == ["name", "order", "stages", "form"]
+    table, legend = capsys.readouterr().out.split("\n\n")
+    lines = table.splitlines()
+    assert lines[0].split()[:6] == ["name", "order", "stages", "form", "flows/2", "flows/3"]
     names = [line.split()[0] for line in lines[1:]]
     assert names == list(jaxsplit.schemes)
+    assert all(form in legend for form in ("symmetric:", "lie-adjoint:", "partitioned:"))  # what stages count
     assert main(["schemes", "--json"]) == 0
     table = _json_out(capsys)["schemes"]
+    body = jaxsplit.RigidBody(jnp.asarray([3.0, 2.0, 1.5]))
     for row in table:
         s = jaxsplit.schemes[row["name"]]
         assert (row["order"], row["stages"], row["form"]) == (s.order, s.stages, s.form)
+        assert row["stages_unit"]
+        # the flows column is the sub-flow count of the built step (one step, no FSAL across steps)
+        two = jaxsplit.splitting(body, s.name, split="casimir")
+        assert row["flows_per_step"]["2"] == two.flows_per_step + (1 if two.fsal else 0), s.name
+        assert (row["flows_per_step"]["3"] is None) == (s.form == "partitioned")
 
 
 

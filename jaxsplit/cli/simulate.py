@@ -53,7 +53,7 @@ examples:
   jaxsplit simulate --system attitude --q0 1,0,0,0 --scheme kahan-li-6 --t-end 50
   jaxsplit simulate --system gravity-gradient --rate 0.5 --gamma0 1,0,0 --m0 0.1,0.2,1
   jaxsplit simulate --save-at 0.5,1,2.5 --out obs.csv  # states at those times (partial steps)
-  jaxsplit simulate --save-at 0.5,1,2.5 --noise 1e-3 --seed 1 --out obs.npz   # noisy observations
+  jaxsplit simulate --save-at 0.5,1,1.5,2,2.5,3 --noise 1e-3 --seed 1 --out obs.npz  # observations for fit
   jaxsplit simulate --dtype float32 --renormalize --scheme kahan-li-6 --steps 1e5
   jaxsplit simulate --json --no-save                  # one JSON object, no files
   jaxsplit simulate --dt -0.01 --steps 100            # backwards in time
