@@ -161,8 +161,8 @@ def run(args):
         inertia1, source = None, _file_energy_source(args.data, meta)
     elif inertia1 is not None:
         source = f"the file's inertia1 ({args.data})"
-    _args.refuse_unused(args, {"energy_sigma": (energy is not None, "with an energy gauge (--energy, or an energy "
-                                                                      "in the data file)")})
+    with_energy = "with an energy gauge (--energy, or an energy in the data file)"
+    _args.refuse_unused(args, {"energy_sigma": (energy is not None, with_energy)})
     res = fit_inertia(t, states["m"], energy=energy, energy_sigma=args.energy_sigma, inertia1=inertia1,
                       fit_m0=not args.fixed_m0, scheme=scheme, max_step=args.max_step)
     with _signals.current().critical():  # the fit is done: print it whole

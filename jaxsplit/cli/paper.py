@@ -43,8 +43,8 @@ def run(args):
     from ..paper import output_names
     from ..paper._output import write_audit
 
-    _args.refuse_unused(args, {"claims": (not args.resume, "without --resume (a resumed audit runs the claims it "
-                                                           "was started with)")})
+    without = "without --resume (a resumed audit runs the claims it was started with)"
+    _args.refuse_unused(args, {"claims": (not args.resume, without)})
     if args.claims is not None:
         output_names(args.claims)  # unknown ids refused before the directory is touched
     start = time.perf_counter()

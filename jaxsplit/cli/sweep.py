@@ -58,8 +58,9 @@ against h, one line per inertia ratio pair: median and max over the states). Per
 energy_error = max|H/H0 - 1| and casimir_error = max|C/C0 - 1| over every step, error =
 max|m_n - m_ref(t_end)| against a high-order reference (reference_accuracy bounds its own
 error), poisson_defect of one step at m0, the step size h actually used (t_end / n_steps)
-and n_steps. An existing DIR is refused unless --resume (continue it; the inputs must be
-the same) or --force (start it over).
+and n_steps. A DIR that holds files (a sweep's or anyone's) is refused unless --resume
+(continue the sweep in it; the inputs must be the same) or --force (start the sweep over;
+files that are not the sweep's are left alone); --resume needs a sweep to continue.
 """
 
 

@@ -69,6 +69,11 @@ def _wanted(claims):
     return wanted
 
 
+def require_x64() -> None:
+    if not jax.config.jax_enable_x64:
+        raise InputError("the paper audit measures at float64 round-off: enable jax_enable_x64 first")
+
+
 def _run_claim(claim, ctx):
     """One claim function's (result, figure data): the unit of work the audit keeps."""
     return claim(ctx)
@@ -89,10 +94,8 @@ def audit_steps(claims=None, *, figures: bool = True, finished=()):
     ``finished``: records of an earlier run (with their figures already written) whose
     functions are not run again. Needs float64 (the CLI enables it). Writes nothing.
     """
-    if not jax.config.jax_enable_x64:
-        raise InputError("the paper audit measures at float64 round-off: enable jax_enable_x64 first")
+    require_x64()
     wanted = _wanted(claims)
-    order = {c: i for i, c in enumerate(CLAIM_IDS)}
     done = {r["id"]: r for r in finished if r["id"] in wanted and r["verdict"] != NOT_RUN}
     ctx, timings = {}, {}
     todo = [(ids, claim) for ids, claim in CLAIMS

@@ -44,9 +44,10 @@ def write_audit(out_dir, claims=None, *, figures: bool = True, force: bool = Fal
     """Audit into ``out_dir`` claim by claim (see the module docstring); return the records.
     ``on_done(records, out)`` runs with the last files, while signals are only recorded."""
     from ..cli import _io, _signals
-    from ._audit import audit_steps, output_names
+    from ._audit import audit_steps, output_names, require_x64
     from ._records import NOT_RUN
 
+    require_x64()  # before the directory is touched
     if resume and force:
         raise InputError("--resume and --force contradict each other (continue the audit, or start it over)")
     if resume and claims is not None:

@@ -89,8 +89,9 @@ def report_markdown(records, figures, timings, section_of) -> str:
     lines = [title, "", intro, "", "Verdicts and their rules:", ""]
     lines += [f"- **{word}**: {rule}" for word, rule in VERDICTS.items()]
     if any(r["verdict"] == NOT_RUN for r in records):
-        lines += [f"- **{NOT_RUN}**: no verdict: the audit stopped before this claim (`jaxsplit paper --out DIR "
-                  "--resume` runs the claims not run and keeps the others)"]
+        rule = ("no verdict: the audit stopped before this claim (`jaxsplit paper --out DIR --resume` runs the "
+                "claims not run and keeps the others)")
+        lines += [f"- **{NOT_RUN}**: {rule}"]
     lines += ["", "| id | verdict | claim |", "|---|---|---|"]
     lines += [f"| {r['id']} | **{r['verdict']}** | {_esc(r['statement'])} |" for r in records]
     counts = {}
