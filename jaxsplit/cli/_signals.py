@@ -190,19 +190,21 @@ def end_process(status: int, stop: Policy):
     """End the process now: with ``status``, or 130 when a signal arrived at any moment
     before it is gone (the documented status of an interrupted run, also for a signal that
     comes after the last output is written). The signals are blocked first, so one arriving
-    from then on stays pending and is counted here; no interpreter teardown follows (a
-    signal there was once ignored, turning 130 into 0 in 6 runs of 10)."""
-    signal.pthread_sigmask(signal.SIG_BLOCK, SIGNALS)
-    late = stop.received if stop.received is not None else min(_pending(), default=None)
+    from then on stays pending, or (taken by another thread) left its byte in the wakeup pipe,
+    and is counted here; no interpreter teardown follows (a signal there was once ignored,
+    turning 130 into 0 in 6 runs of 10). Only a signal after ``os._exit`` (the kernel
+    releasing the process) finds the status decided."""
+    signal.pthread_sigmask(signal.SIG_BLOCK, SIGNALS)  # this thread's mask: XLA's threads may still take one,
+    for stream in (sys.stdout, sys.stderr):  # and then its byte is in the wakeup pipe
+        with contextlib.suppress(Exception):  # e.g. a closed pipe
+            stream.flush()
+    late = stop.received
+    if late is None:
+        late = next(iter(stop._read()), None) or min(_pending(), default=None)
     if late is not None and status == 0:
-        with contextlib.suppress(Exception):
-            sys.stdout.flush()
         os.write(2, f"jaxsplit: interrupted ({signal.Signals(late).name}) after the work was done; "
                     "every output is complete\n".encode())
         status = EXIT_INTERRUPTED
-    for stream in (sys.stdout, sys.stderr):
-        with contextlib.suppress(Exception):  # e.g. a closed pipe
-            stream.flush()
     os._exit(status)
 
 
