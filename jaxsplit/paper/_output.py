@@ -15,8 +15,9 @@ from ..core._errors import InputError
 MARKER = "claims.json"  # every record, finished or "not run": rewritten after each claim, last
 
 
-def finished_records(out, what: str) -> list[dict]:
-    """The records of the audit in ``out`` (what ``resume`` keeps); an error when there is none."""
+def finished_records(out, what: str) -> tuple[list[str], list[dict]]:
+    """(the claim ids of the audit in ``out``, its finished records that ``resume`` keeps: each
+    with its figure, if it draws one); an error when ``out`` holds no audit."""
     from ._audit import CLAIM_IDS
     from ._figures import figure_name
     from ._records import NOT_RUN
