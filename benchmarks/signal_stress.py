@@ -10,7 +10,8 @@ between its start and 1.1 x its uninterrupted duration, then checks the contract
 * no finished work lost: an interrupted ``simulate`` that wrote its trajectory says so and
   the file holds every step it reports; an interrupted ``sweep`` keeps exactly the chunks
   it reports, each proving its inputs, and ``--resume`` then gives results identical bit
-  for bit to an uninterrupted run; an interrupted ``paper`` leaves all of the audit or none.
+  for bit to an uninterrupted run; an interrupted ``paper`` keeps every finished claim as an
+  uninterrupted audit measures it, and ``--resume`` completes it to the same records.
 
 Runs come from the fork server of ``tests/signal_harness.py`` (JAX imported once; each
 child starts after the imports). A second, smaller set goes through the real entry point
@@ -113,10 +114,16 @@ def _check(command, run, directory: Path, zygote, reference, commands) -> list[s
             problems.append(f"resume failed: {resumed.stderr.strip()}")
         elif not _same_results(directory / "sw" / "results.npz", reference["sweep"]):
             problems.append("resumed results differ from an uninterrupted run")
-    if command == "paper":
-        present = {p.name for p in (directory / "audit").glob("*")} if (directory / "audit").exists() else set()
-        if present and present != reference["paper"]:
-            problems.append(f"partial audit {sorted(present)}")
+    if command == "paper" and rc == 130 and (directory / "audit" / "claims.json").exists():
+        kept = [r for r in json.loads((directory / "audit" / "claims.json").read_text()) if r["verdict"] != "not run"]
+        if any(r != reference["paper"][r["id"]] for r in kept):
+            problems.append("a kept claim differs from an uninterrupted audit's")
+        resumed = zygote.run(commands["paper"][:3] + ["--resume"], directory)
+        records = json.loads((directory / "audit" / "claims.json").read_text())
+        if resumed.returncode != 0:
+            problems.append(f"resume failed: {resumed.stderr.strip()}")
+        elif {r["id"]: r for r in records} != reference["paper"]:
+            problems.append("the resumed audit differs from an uninterrupted one")
     if command == "fit" and rc == 130 and run.stdout and "inertia_ratios" not in json.loads(run.stdout):
         problems.append("partial fit output")
     return problems
@@ -165,7 +172,7 @@ def main():
             with np.load(d / "sw" / "results.npz") as z:
                 reference["sweep"] = {k: z[k] for k in z.files if k != "metadata"}
         if name == "paper":
-            reference["paper"] = {p.name for p in (d / "audit").glob("*")}
+            reference["paper"] = {r["id"]: r for r in json.loads((d / "audit" / "claims.json").read_text())}
 
     trials = []
     for i in range(args.trials):

@@ -9,9 +9,9 @@ moment (``Zygote.signal``: the stress runs), or from inside at a chosen phase (a
 ``trigger``: the deterministic tests), by ``os.kill`` of the child itself:
 
 * ``parse``: while the arguments are parsed (nothing started);
-* ``after-main``: after ``main`` returned, while the process exits;
 * ``call:MODULE:NAME:N``: just before the N-th call of ``MODULE.NAME`` (e.g. the N-th
-  chunk of a run, or the N-th file written);
+  chunk of a run, the N-th file written, or ``_signals:end_process:1``: after ``main``
+  decided its status, while the process ends);
 * ``during:MODULE:NAME:SECONDS``: SECONDS after the first call of ``MODULE.NAME`` began,
   from a thread, so the signal arrives while the main thread is inside XLA (compiling or
   running).
@@ -52,14 +52,6 @@ def serve():
 
 def arm(trigger, sig):
     kind, _, rest = trigger.partition(":")
-    if kind == "after-main":
-        real_main = jaxsplit.cli.main
-        def main():
-            status = real_main()
-            os.kill(os.getpid(), sig)
-            return status
-        jaxsplit.cli.main = main
-        return
     if kind == "parse":
         real = jaxsplit.cli.build_parser
         def build_parser():

@@ -202,3 +202,92 @@ def test_report_numbers_have_three_significant_digits():
     assert number(1000.0) == "1000" and number(7) == "7" and number(True) == "yes"
     assert cell(None) == "—" and cell([0.9191, 1.0512]) == "0.919, 1.05"
     assert cell({"h": 0.075, "error": 0.010051984189153262}) == "h: 0.075; error: 0.0101"
+
+
+# ---------------------------------------------------------------- interrupted audits keep every finished claim
+class _Abandoned(Exception):
+    """Raised by the faked ``os._exit`` of the signal policy (the process would end here)."""
+
+
+def _fake_registry(monkeypatch, kill_at=None):
+    """Four cheap claim functions in two sections (one records two ids, one draws a figure) in
+    place of the paper's; the one numbered ``kill_at`` sends SIGTERM to this process as it
+    starts (deterministic: the signal lands inside a claim). Returns the calls made."""
+    import os
+    import signal
+
+    from jaxsplit.cli import _signals
+    from jaxsplit.paper import _audit, _figures
+    from jaxsplit.paper._records import record
+
+    calls = []
+
+    def claim(number, ids, figure=False):
+        def measure(ctx):
+            calls.append(number)
+            if number == kill_at:
+                os.kill(os.getpid(), signal.SIGTERM)
+            records = [record(cid, f"statement {cid}", "confirmed", {"measured": 0.5 * number + k})
+                       for k, cid in enumerate(ids)]
+            return records, ({ids[0]: np.linspace(0.0, number, 5)} if figure else None)
+        return ids, measure
+
+    claims = (claim(1, ("a",)), claim(2, ("b1", "b2")), claim(3, ("c",), figure=True), claim(4, ("d",)))
+    monkeypatch.setattr(_audit, "CLAIMS", claims)
+    monkeypatch.setattr(_audit, "CLAIM_IDS", ("a", "b1", "b2", "c", "d"))
+    monkeypatch.setattr(_audit, "SECTION_OF", {"a": "§A", "b1": "§A", "b2": "§A", "c": "§B", "d": "§B"})
+
+    def plot(data):
+        fig, ax = _figures._plt().subplots(figsize=(2, 2))
+        ax.plot(data)
+        return fig
+
+    monkeypatch.setitem(_figures._PLOTS, "c", (plot, "c_figure.png", "the figure of c"))
+    monkeypatch.setattr(_signals.os, "_exit", lambda code: (_ for _ in ()).throw(_Abandoned(code)))
+    return calls
+
+
+def _without_timings(report: str) -> str:
+    return report.split("## Run time per claim")[0]
+
+
+@pytest.mark.parametrize("kill_at,kept", [(1, []), (2, ["a"]), (4, ["a", "b1", "b2", "c"])],
+                         ids=["early", "middle", "late"])
+def test_an_interrupted_audit_keeps_every_finished_claim_and_resumes_to_the_same_report(
+        kill_at, kept, monkeypatch, tmp_path, capfd):
+    reference = tmp_path / "reference"
+    _fake_registry(monkeypatch)
+    assert main(["paper", "--out", str(reference)]) == 0
+    capfd.readouterr()
+    calls = _fake_registry(monkeypatch, kill_at=kill_at)
+    out = tmp_path / "audit"
+    with pytest.raises(_Abandoned) as ended:
+        main(["paper", "--out", str(out)])
+    assert ended.value.args == (130,)
+    err = capfd.readouterr().err
+    assert f"{len(kept)} of 5 claims are saved in {out}" in err and "--resume" in err, err
+    records = json.loads((out / "claims.json").read_text())
+    want = {r["id"]: r for r in json.loads((reference / "claims.json").read_text())}
+    assert [r["id"] for r in records if r["verdict"] != "not run"] == kept
+    assert all(r == want[r["id"]] for r in records if r["id"] in kept)  # finished claims: whole, as measured
+    report = (out / "report.md").read_text()
+    assert all(f"### {cid} — not run" in report for cid in want if cid not in kept)
+    assert (out / "c_figure.png").exists() == ("c" in kept)
+    assert sorted(p.name for p in out.iterdir() if p.name.startswith(".")) == []  # no lock, no temporary
+    calls = _fake_registry(monkeypatch)
+    assert main(["paper", "--out", str(out), "--resume"]) == 0
+    assert calls == [n for n in (1, 2, 3, 4) if n >= kill_at]  # only the claims not run
+    assert (out / "claims.json").read_text() == (reference / "claims.json").read_text()
+    assert _without_timings((out / "report.md").read_text()) == _without_timings((reference / "report.md").read_text())
+    assert (out / "c_figure.png").exists()
+
+
+def test_resume_needs_an_audit_and_keeps_its_claims(monkeypatch, tmp_path, capsys):
+    _fake_registry(monkeypatch)
+    assert main(["paper", "--out", str(tmp_path / "none"), "--resume"]) == 2
+    assert "nothing to resume" in capsys.readouterr().err and not (tmp_path / "none").exists()
+    assert main(["paper", "--out", str(tmp_path / "a"), "--claims", "a,c"]) == 0
+    assert main(["paper", "--out", str(tmp_path / "a"), "--resume", "--claims", "d"]) == 2
+    assert "--claims has no effect here" in capsys.readouterr().err
+    assert main(["paper", "--out", str(tmp_path / "a"), "--claims", "d"]) == 2
+    assert "already holds an audit; pass --resume" in capsys.readouterr().err

@@ -209,15 +209,23 @@ def test_check_exact_splitting_is_not_a_failure(capsys):
 
 def test_schemes_table_lists_every_registered_scheme(capsys):
     assert main(["schemes"]) == 0
-    lines = capsys.readouterr().out.splitlines()
-    assert lines[0].split()[:4] == ["name", "order", "stages", "form"]
+    table, legend = capsys.readouterr().out.split("\n\n")
+    lines = table.splitlines()
+    assert lines[0].split()[:6] == ["name", "order", "stages", "form", "flows/2", "flows/3"]
     names = [line.split()[0] for line in lines[1:]]
     assert names == list(jaxsplit.schemes)
+    assert all(form in legend for form in ("symmetric:", "lie-adjoint:", "partitioned:"))  # what stages count
     assert main(["schemes", "--json"]) == 0
     table = _json_out(capsys)["schemes"]
+    body = jaxsplit.RigidBody(jnp.asarray([3.0, 2.0, 1.5]))
     for row in table:
         s = jaxsplit.schemes[row["name"]]
         assert (row["order"], row["stages"], row["form"]) == (s.order, s.stages, s.form)
+        assert row["stages_unit"]
+        # the flows column is the sub-flow count of the built step (one step, no FSAL across steps)
+        two = jaxsplit.splitting(body, s.name, split="casimir")
+        assert row["flows_per_step"]["2"] == two.flows_per_step + (1 if two.fsal else 0), s.name
+        assert (row["flows_per_step"]["3"] is None) == (s.form == "partitioned")
 
 
 
@@ -330,3 +338,45 @@ def test_chunked_run_stops_at_the_first_nonfinite_step(save_every, chunk):
     expected = [*range(0, bad, save_every), bad - 1] if (bad - 1) % save_every else list(range(0, bad, save_every))
     assert list(res.steps) == expected
     np.testing.assert_array_equal(res.x, 2.0 ** res.steps[:, None] * np.ones((1, 3)))
+
+
+def _rk4_orbit(inertia, m0, t_end=12.0, n=3000):
+    """A free body's m(t) by classical RK4 in NumPy (an independent path, no compilation)."""
+    w = 1 / np.asarray(inertia, float)
+
+    def f(m):
+        return np.cross(m, w * m)
+
+    h, m, out = t_end / n, np.asarray(m0, float), []
+    for _ in range(n):
+        k1 = f(m)
+        k2 = f(m + h / 2 * k1)
+        k3 = f(m + h / 2 * k2)
+        m = m + h / 6 * (k1 + 2 * k2 + 2 * k3 + f(m + h * k3))
+        out.append(m)
+    return np.array(out)
+
+
+VIEW_AREA_FRACTION = 0.9  # the drawn orbit encloses at least this part of its largest projected area
+
+
+@pytest.mark.parametrize("inertia,m0", [((3, 2, 1.5), (0.2, 0.9, 0.3)), ((3, 2, 1.5), (0.9, 0.2, 0.3)),
+                                        ((2, 2, 1), (0.6, 0.0, 0.8)), ((1, 2, 2.5), (0.1, 0.3, 0.95))])
+def test_sphere_view_never_sees_the_orbit_edge_on(inertia, m0):
+    """The sphere panel looks along the orbit's area vector: the orbit as drawn (the line's
+    screen coordinates) encloses nearly its largest projected area, on the near side (once
+    seen edge-on, I = (3, 2, 1.5), m0 = (0.2, 0.9, 0.3): a line across the level curves)."""
+    from jaxsplit.cli._figures import Curve, Sphere, _pyplot, _sphere_panel, area_vector
+
+    orbit = _rk4_orbit(inertia, m0)
+    radius = float(np.linalg.norm(m0))
+    plt = _pyplot()
+    fig, ax = plt.subplots()
+    _sphere_panel(ax, Sphere("m", [Curve(orbit, "m(t)", "C0")], radius,
+                             levels=lambda p: np.sum(p**2 / np.asarray(inertia, float), axis=-1)))
+    line = next(ln for ln in ax.lines if ln.get_label() == "m(t)")  # the near-side part, as drawn
+    x, y = np.asarray(line.get_xdata(), float), np.asarray(line.get_ydata(), float)
+    plt.close(fig)
+    assert np.isfinite(x).all(), "part of the orbit is drawn on the far side"
+    drawn = 0.5 * abs(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+    assert drawn >= VIEW_AREA_FRACTION * np.linalg.norm(area_vector([orbit])), (drawn, area_vector([orbit]))

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from jaxsplit.cli import main
-from jaxsplit.cli.check import ORDER_TOL, Window, _fit, verdict
+from jaxsplit.cli.check import MIN_FIT_POINTS, ORDER_TOL, Window, _fit, _window_counts, verdict
 
 EPS = np.finfo(np.float64).eps
 
@@ -21,7 +21,7 @@ def _json(capsys):
 
 
 def _measured(errors_of_h):
-    counts = np.unique(np.round(np.geomspace(4, 4000, 40)).astype(int))  # down to round-off for every case
+    counts = np.unique(np.round(np.geomspace(4, 4000, 80)).astype(int))  # down to round-off for every case
     hs = 10.0 / counts
     errs = errors_of_h(hs) + 20 * EPS * np.sqrt(counts)  # the round-off floor seen at T = 10
     order, before, used = _fit(counts, hs, errs, Window(1.0, EPS, 0.0))
@@ -43,6 +43,21 @@ def test_order_verdicts(errors, nominal, expected):
     assert (reason is None) == (state in ("agrees", "disagrees"))
     if state == "agrees":
         assert abs(m["order"] - nominal) <= ORDER_TOL
+
+
+def test_too_few_step_counts_in_the_window_is_not_an_order():
+    """A high order reaches round-off within a few small step counts (kahan-li-10 at h = 2.5 .. 1.4):
+    fewer than MIN_FIT_POINTS counts in the window give no order; one more count gives one."""
+    counts = np.array([1, 2, 5, 6, 7, 8, 16, 32])
+    hs = 10.0 / counts
+    errs = 1e-12 * hs**10 + 20 * EPS * np.sqrt(counts)
+    window = Window(1.0, EPS, 0.0)
+    inside = _window_counts(counts, hs, errs, window)
+    assert inside.size == MIN_FIT_POINTS - 1 and _fit(counts, hs, errs, window) is None
+    denser = np.sort(np.append(counts, 4))  # a fifth count in the window: measured
+    hs = 10.0 / denser
+    order, _, used = _fit(denser, hs, 1e-12 * hs**10 + 20 * EPS * np.sqrt(denser), window)
+    assert used.sum() == MIN_FIT_POINTS and abs(order - 10) <= ORDER_TOL
 
 
 @pytest.mark.parametrize("scheme,split,order_state", [

@@ -159,8 +159,10 @@ def test_simulate_output_fits_unchanged_with_and_without_energy(name, observatio
     r = _json(capsys)
     np.testing.assert_allclose(r["inertia_ratios"], [2 / 3, 0.5], rtol=RATIO_RTOL)
     assert "energy E = " in r["gauge"] and r["ratio_std"] is not None and not r["gauge_assumed"]
+    assert "computed by jaxsplit simulate" in r["gauge_source"] and "exact only for synthetic data" in r["gauge_source"]
     assert main(fit + ["--energy", str(1.2 * energy)]) == 0  # the option overrides the file
     r = _json(capsys)
+    assert r["gauge_source"] == "--energy"
     np.testing.assert_allclose(r["inertia_ratios"], _expected_ratios(1.2 * energy), rtol=RATIO_RTOL)
     assert abs(r["inertia_ratios"][0] - 2 / 3) > 10 * RATIO_RTOL  # another gauge: other ratios
 

@@ -15,6 +15,7 @@ Signals and real concurrent processes are in ``test_signals.py``.
 
 import json
 import os
+import stat
 
 import numpy as np
 import pytest
@@ -108,7 +109,17 @@ SWEEP = [
     (["--scheme", "triple-jump-22"], ["--scheme triple-jump-22", "3^10 stages"]),
     (["--chunk-cases", "0"], ["--chunk-cases", "positive integer"]),
     (["--reference-angle", "0"], ["--reference-angle", "positive"]),
-    (["--samples", "3"], ["--samples applies only with --sampling random"]),
+    (["--samples", "3"], ["--samples has no effect here", "only with --sampling random"]),
+    # a flag without effect in its combination is refused, never ignored (one check: _args.refuse_unused)
+    (["--ratio-range", "0.5,2"], ["--ratio-range has no effect here", "--sampling random"]),
+    (["--dt-range", "0.01,0.1"], ["--dt-range has no effect here", "--sampling random"]),
+    (["--seed", "3"], ["--seed has no effect here", "--sampling random"]),
+    (["--sampling", "random", "--samples", "3", "--states", "4"], ["--states has no effect here", "--sampling grid"]),
+    (["--sampling", "random", "--samples", "3", "--dt", "0.1"], ["--dt has no effect here", "--sampling grid"]),
+    (["--split", "axes", "--shift-axis", "2"], ["--shift-axis has no effect here", "--split casimir"]),
+    (["--resume", "--out", "nothere"], ["nothing to resume", "'nothere' does not exist"]),
+    (["--resume", "--out", "sub"], ["nothing to resume", "'sub' holds no sweep"]),
+    (["--out", "mine"], ["--out 'mine' is not empty", "'notes.txt'", "--force"]),
     (["--max-memory", "1"], ["--max-memory", "cases"]),
     (["--resume", "--force", "--out", "d"], ["--resume and --force contradict"]),
     (["--out", "a-file"], ["--out directory 'a-file' exists and is not a directory"]),
@@ -138,7 +149,12 @@ PAPER = [
     (["--out", "a", "--claims", "nope"], ["unknown claim id(s) ['nope']"]),
     (["--out", "a-file"], ["--out directory 'a-file' exists and is not a directory"]),
     (["--out", "p" * 300], ["--out directory", "300 bytes long"]),
-    (["--out", "old", "--claims", "stages"], ["audit file", "claims.json", "exists", "--force"]),
+    (["--out", "old", "--claims", "stages"], ["--out 'old' already holds an audit", "--resume", "--force"]),
+    (["--out", "nothere", "--resume"], ["nothing to resume", "'nothere' does not exist"]),
+    (["--out", "sub", "--resume"], ["nothing to resume", "holds no claims.json"]),
+    (["--out", "old", "--resume", "--force"], ["--resume and --force contradict"]),
+    (["--out", "old", "--resume"], ["cannot resume", "claims.json", "is not a jaxsplit audit"]),
+    (["--out", "old", "--resume", "--claims", "stages"], ["--claims has no effect here", "without --resume"]),
     (["--out", "old-report", "--claims", "stages"], ["report.md", "exists", "--force"]),
     (["--out", "old-figure", "--claims", "order2"], ["order2_ladder.png", "exists", "--force"]),
 ]
@@ -185,7 +201,12 @@ SYSTEMS = [
     (["--save-at", "@empty-times.txt"], ["--save-at", "holds no times"]),
     (["--save-at", "1e300"], ["--save-at 1e+300 / --dt 0.01", "steps, more than"]),
     (["--save-at", "1,2", "--max-memory", "3K"], ["--max-memory", "saved states"]),
-    (["--noise", "1e-3", "--no-save"], ["--noise applies to the written trajectory", "--no-save"]),
+    (["--noise", "1e-3", "--no-save"], ["--noise has no effect here", "the written trajectory", "--no-save"]),
+    (["--seed", "3"], ["--seed has no effect here", "--noise SIGMA > 0"]),
+    (["--out", "x.npz", "--figure", "x.png", "--no-figure"], ["--figure has no effect here", "without --no-figure"]),
+    (["--no-save", "--format", "csv"], ["--format has no effect here", "--no-save"]),
+    (["--no-save", "--force"], ["--force has no effect here", "--no-save"]),
+    (["--no-save", "--no-figure"], ["--no-figure has no effect here", "--no-save"]),
     (["--noise", "-1"], ["--noise", ">= 0"]),
     (["--seed", "-3"], ["--seed", "'-3'"]),
     (["--dtype", "float16"], ["--dtype", "invalid choice", "'float16'"]),
@@ -210,6 +231,8 @@ def _setup(tmp_path):
     (tmp_path / "bad-times.txt").write_text("0.5\n# a comment\n2,5\n")
     (tmp_path / "empty-times.txt").write_text("# nothing\n\n")
     (tmp_path / "sub").mkdir()
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "notes.txt").write_text("the user's")
     for name, file in (("old", "claims.json"), ("old-report", "report.md"), ("old-figure", "order2_ladder.png")):
         (tmp_path / name).mkdir()
         (tmp_path / name / file).write_text("precious")
@@ -241,7 +264,10 @@ FIT_FILES = {
     "zero": (lambda p: np.savez(p, **_obs(_T, 0 * _MOVING)), ["do not determine the inertia", "zero"]),
     "on-axis": (lambda p: np.savez(p, **_obs(_T, np.tile([0.0, 0.0, 2.0], (10, 1)))), ["principal axis"]),
     "decreasing": (lambda p: np.savez(p, **_obs(_T[::-1], _MOVING)), ["strictly increasing"]),
-    "three": (lambda p: np.savez(p, **_obs(_T[:3], _MOVING[:3])), ["n >= 4"]),
+    "three": (lambda p: np.savez(p, **_obs(_T[:3], _MOVING[:3])), ["3 observation times", "at least 4",
+                                                                     "--save-at"]),
+    "gamma-zero": (lambda p: np.savez(p, **_obs(_T, _MOVING, gamma=0 * _MOVING)),
+                   ["do not determine", "weight x centre of mass x", "gamma is 0 at every observation"]),
     "inf": (lambda p: np.savez(p, **_obs(_T, np.where(_MOVING > 0.9, np.inf, _MOVING))), ["m must be finite"]),
     "object": (lambda p: np.savez(p, t=_T, m=np.array([object()] * 30).reshape(10, 3)), ["not a readable .npz"]),
     "energy-pair": (lambda p: np.savez(p, **_obs(_T, _MOVING, energy=np.ones(2))), ["'energy'", "one number"]),
@@ -253,6 +279,8 @@ FIT_OPTIONS = [
     (["--energy", "-1"], ["--energy", "positive"]),
     (["--energy", "nan"], ["--energy", "positive"]),
     (["--energy-sigma", "-1"], ["--energy-sigma", ">= 0"]),
+    (["--energy-sigma", "0.1"], ["--energy-sigma has no effect here", "with an energy gauge"]),
+    (["--inertia1", "2", "--energy-sigma", "0.1"], ["--energy-sigma has no effect here"]),
     (["--inertia1", "0"], ["--inertia1", "positive"]),
     (["--max-step", "0"], ["--max-step", "positive"]),
     (["--max-step", "1e-300"], ["max_step 1e-300", "more than 2,147,483,647"]),
@@ -326,9 +354,22 @@ def test_a_symlink_or_hard_link_to_an_output_is_that_output(capsys, tmp_path, mo
     os.link(tmp_path / "target.npz", tmp_path / "hard.png")
     rc = main(["simulate", "--steps", "5", "--out", "target.npz", "--figure", "hard.png", "--force"])
     _assert_refused(rc, capsys.readouterr(), ["figure 'hard.png' is the same file as the trajectory"])
-    rc = main(["simulate", "--steps", "5", "--out", "link.npz", "--no-figure", "--force", "--quiet"])
-    assert rc == 0 and capsys.readouterr().err == ""
-    assert (tmp_path / "link.npz").is_symlink() and np.load(tmp_path / "target.npz")["m"].shape == (6, 3)
+
+
+
+@pytest.mark.parametrize("command", ["simulate", "sweep", "paper"])
+def test_force_replaces_a_symlink_never_the_file_it_points_to(command, capsys, tmp_path, monkeypatch):
+    """Every output goes through the one writer: --force replaces the link itself."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "other.txt").write_text("precious")
+    out, argv = {"simulate": ("x.npz", ["simulate", "--steps", "5", "--no-figure", "--out", "x.npz"]),
+                 "sweep": ("d/summary.json", ["sweep", "--states", "2", "--t-end", "0.2", "--no-figure", "--out", "d"]),
+                 "paper": ("d/claims.json", ["paper", "--claims", "stages", "--out", "d"])}[command]
+    (tmp_path / out).parent.mkdir(exist_ok=True)
+    os.symlink(tmp_path / "other.txt", tmp_path / out)
+    assert main([*argv, "--force", "--quiet"] if command != "paper" else [*argv, "--force"]) == 0, capsys.readouterr()
+    assert (tmp_path / "other.txt").read_text() == "precious"
+    assert not (tmp_path / out).is_symlink() and (tmp_path / out).stat().st_size > 0
 
 
 @pytest.mark.parametrize("special", ["device", "fifo"])
@@ -336,10 +377,13 @@ def test_a_special_file_is_never_replaced_even_with_force(special, capsys, tmp_p
     monkeypatch.chdir(tmp_path)
     if special == "fifo":
         os.mkfifo(tmp_path / "run.npz")
-    else:
-        os.symlink("/dev/null", tmp_path / "run.npz")  # resolved: the device itself
-    rc = main(["simulate", "--steps", "5", "--out", "run.npz", "--no-figure", "--force"])
-    _assert_refused(rc, capsys.readouterr(), ["'run.npz' exists and is not a regular file", "never replaced"])
+        rc = main(["simulate", "--steps", "5", "--out", "run.npz", "--no-figure", "--force"])
+        _assert_refused(rc, capsys.readouterr(), ["'run.npz' exists and is not a regular file", "never replaced"])
+        assert stat.S_ISFIFO(os.lstat(tmp_path / "run.npz").st_mode)
+    else:  # a symlink to a device: the link is replaced, the device never written
+        os.symlink("/dev/null", tmp_path / "run.npz")
+        assert main(["simulate", "--steps", "5", "--out", "run.npz", "--no-figure", "--force", "--quiet"]) == 0
+        assert (tmp_path / "run.npz").is_file() and not (tmp_path / "run.npz").is_symlink()
     assert os.path.exists("/dev/null") and not os.path.isfile("/dev/null")
 
 

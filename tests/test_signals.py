@@ -91,14 +91,26 @@ def test_check_interrupted_inside_xla_exits_130(zygote, tmp_path):
     assert run.stdout == "" and list(tmp_path.iterdir()) == []
 
 
-def test_paper_interrupted_mid_audit_leaves_the_directory_as_it_was(zygote, tmp_path):
+def test_paper_interrupted_mid_audit_keeps_the_finished_claim_and_resumes(zygote, tmp_path):
+    """A real process, SIGTERM inside the second claim: the first claim's record is on disk,
+    the other marked not run, the user's file untouched; --resume runs only the second.
+    (Three moments, compared with an uninterrupted audit: tests/test_audit.py, in-process.)"""
     out = tmp_path / "audit"
     out.mkdir()
     (out / "notes.txt").write_text("mine")
-    run = zygote.run(PAPER + ["--out", out], tmp_path, trigger="call:jaxsplit.paper._audit:_jsonable:1",
-                     signal="SIGTERM")
+    argv = ["paper", "--claims", "ex2.1-i,stages", "--out", out]
+    run = zygote.run(argv, tmp_path, trigger="call:jaxsplit.paper._audit:_run_claim:2", signal="SIGTERM")
     _interrupted(run, "SIGTERM")
-    assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]  # no staging directory, no lock, no audit
+    assert "1 of 2 claims are saved" in run.stderr and "--resume" in run.stderr, run.stderr
+    first = json.loads((out / "claims.json").read_text())
+    assert [r["verdict"] for r in first][1] == "not run" and first[0]["verdict"] != "not run"
+    assert sorted(p.name for p in out.iterdir()) == ["claims.json", "notes.txt", "report.md"]
+    run = zygote.run(["paper", "--out", out, "--resume"], tmp_path)
+    assert run.returncode == 0, run.stderr
+    final = json.loads((out / "claims.json").read_text())
+    assert final[0] == first[0] and final[1]["verdict"] == "corrected"
+    assert "Kept from an earlier run (resumed): ex2.1-i." in (out / "report.md").read_text()
+    assert (out / "notes.txt").read_text() == "mine" and leftovers(tmp_path) == []
 
 
 # ------------------------------------------------------------------ defer: finished chunks are kept
@@ -136,7 +148,7 @@ def test_sweep_stopped_mid_run_keeps_its_proven_chunks(zygote, tmp_path):
      ["run.npz", "run.png"]),
     (SWEEP + ["--out", "sw"], "call:jaxsplit.cli._io:Outputs.write:6", "SIGINT",
      ["sw/results.npz", "sw/summary.json"]),
-    (PAPER + ["--out", "audit"], "call:jaxsplit.cli._io:Outputs.write:1", "SIGINT",
+    (PAPER + ["--out", "audit"], "call:jaxsplit.cli._io:Outputs.write:3", "SIGINT",  # 1, 2: "not run" yet
      ["audit/claims.json", "audit/report.md"]),
 ], ids=["simulate", "sweep", "paper"])
 def test_signal_while_writing_completes_every_output(zygote, tmp_path, argv, trigger, sig, outputs):
@@ -177,12 +189,16 @@ def test_fit_interrupted_while_printing_prints_the_whole_result(sig, monkeypatch
     assert captured.err.strip().endswith("after the work was done; every output is complete")
 
 
-@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
-def test_a_signal_after_main_returned_changes_nothing(zygote, tmp_path, sig):
-    """The process's status is decided once ``main`` returns: a late signal is ignored, not a
-    KeyboardInterrupt during interpreter teardown (found by the stress script)."""
-    run = zygote.run(["schemes"], tmp_path, trigger="after-main", signal=sig)
-    assert run.returncode == 0 and run.stderr == "" and "strang" in run.stdout
+@pytest.mark.parametrize("sig,moment", [("SIGINT", "end_process"), ("SIGTERM", "end_process"),
+                                        ("SIGTERM", "_pending")], ids=["SIGINT", "SIGTERM", "SIGTERM-blocked"])
+def test_a_signal_after_the_last_output_exits_130(zygote, tmp_path, sig, moment):
+    """A late signal (the last file written, the status decided, the process still alive)
+    gives the documented 130, never 0: before the signals are blocked (the handler) and after
+    (pending, counted by ``end_process``; once it exited 0 in 6 runs of 10)."""
+    run = zygote.run(SIMULATE[:1] + ["--steps", "30", "--no-figure", "--quiet", "--out", "run.npz"], tmp_path,
+                     trigger=f"call:jaxsplit.cli._signals:{moment}:1", signal=sig)
+    _interrupted(run, sig)
+    assert _complete(tmp_path / "run.npz") and leftovers(tmp_path) == []
 
 
 # ------------------------------------------------------------------ concurrency

@@ -70,6 +70,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     parser.add_argument("--version", action="version", version=f"jaxsplit {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    parser.commands = sub
     for name in dict.fromkeys(COMMANDS):
         module = _load(name)
         if module is not None:
@@ -79,35 +80,44 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     """Run the command line on ``argv`` (default: ``sys.argv[1:]``, the process's own
-    arguments: then ``main`` is the process, and signals arriving after it returns are
-    ignored so that they cannot change the exit status it decided)."""
-    with _signals.policy(owns_process=argv is None) as stop:
-        from .._xla_cpu import tune_cpu
+    arguments: then ``main`` is the process and ends it, ``_signals.end_process``: a signal
+    at any moment before the process is gone makes its status 130)."""
+    with _signals.policy() as stop:
+        status = _run(argv, stop)
+        if argv is None:
+            _signals.end_process(status, stop)
+    return status
 
-        tune_cpu()  # the command line's own runs: 512-bit vectors (before JAX starts its backend)
-        import jax
 
-        jax.config.update("jax_enable_x64", True)
-        try:
-            parser = build_parser()
-            args = parser.parse_args(argv)
-            if args.command is None:
-                parser.print_help()
-                return 0
-            status = args.func(args) or 0
-        except InputError as err:
-            print(f"jaxsplit: error: {_one_line(err)}", file=sys.stderr)
-            return 2
-        except _signals.Interrupted as stopped:
-            print(f"jaxsplit: interrupted ({stopped}); nothing was left half-written", file=sys.stderr)
-            return _signals.EXIT_INTERRUPTED
-        except BrokenPipeError:  # `jaxsplit schemes | head`
+def _run(argv, stop) -> int:
+    from .._xla_cpu import tune_cpu
+
+    tune_cpu()  # the command line's own runs: 512-bit vectors (before JAX starts its backend)
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        if args.command is None:
+            parser.print_help()
             return 0
-        if stop.requested and status == 0:  # the signal came while the outputs were written: they are complete
-            print(f"jaxsplit: interrupted ({stop.signal_name}) after the work was done; "
-                  "every output is complete", file=sys.stderr)
-            return _signals.EXIT_INTERRUPTED
-        return status
+        args.given = _args.given_options(parser, args.command, argv)  # for _args.refuse_unused
+        status = args.func(args) or 0
+    except InputError as err:
+        print(f"jaxsplit: error: {_one_line(err)}", file=sys.stderr)
+        return 2
+    except _signals.Interrupted as stopped:
+        if stopped.detail:
+            print(f"jaxsplit: interrupted ({stopped}); {stopped.detail}", file=sys.stderr)
+        return _signals.EXIT_INTERRUPTED
+    except BrokenPipeError:  # `jaxsplit schemes | head`
+        return 0
+    if stop.requested and status == 0:  # the signal came while the outputs were written: they are complete
+        print(f"jaxsplit: interrupted ({stop.signal_name}) after the work was done; "
+              "every output is complete", file=sys.stderr)
+        return _signals.EXIT_INTERRUPTED
+    return status
 
 
 def _one_line(err) -> str:

@@ -213,3 +213,29 @@ def add_common_flags(p, *, outputs=True, json_flag=True, quiet=True):
         p.add_argument("--json", action="store_true", help="print the summary as one JSON object on stdout")
     if quiet:
         p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+
+
+def given_options(parser, command: str, argv) -> frozenset:
+    """The destinations of the options the user gave to ``command`` (set by ``main`` as
+    ``args.given``): the command line parsed once more with every default suppressed."""
+    sub = parser.commands.choices[command]
+    saved = [(action, action.default) for action in sub._actions]
+    try:
+        for action, _ in saved:
+            action.default = argparse.SUPPRESS
+        return frozenset(vars(parser.parse_args(argv))) - {"command", "func"}
+    finally:
+        for action, default in saved:
+            action.default = default
+
+
+def refuse_unused(args, rules: dict) -> None:
+    """The one check that no option the user gave is silently ignored: ``rules`` maps an
+    option's destination to (whether it takes effect in this run, where it applies); one
+    given (``args.given``) that takes none is an error naming it and where it applies."""
+    given = getattr(args, "given", frozenset())
+    for dest, (effective, where) in rules.items():
+        if dest in given and not effective:
+            from .._errors import InputError
+
+            raise InputError(f"--{dest.replace('_', '-')} has no effect here: it applies only {where}")

@@ -1,7 +1,7 @@
 """Figures of the command line (matplotlib, Agg backend, imported only when drawing).
 
 ``simulate_figure``: one or two spheres on the left (orthographic views of the visible
-hemisphere with level curves where a function is given: m on |m| = const with the energy's
+hemisphere, seen along the orbits' area vector, with level curves where a function is given: m on |m| = const with the energy's
 levels; the body axes in space for the attitude; Γ on the unit sphere with the potential's
 levels), the errors against time on the right (log scales: the energy, the other
 invariants, the distance to the exact solution). The orbit is drawn only between states
@@ -56,19 +56,38 @@ class Sphere(NamedTuple):
     marks: tuple = ()
 
 
-def _view_basis(points: np.ndarray):
-    """An oblique view direction v that sees most of the points, and a screen basis."""
+def area_vector(paths) -> np.ndarray:
+    """½ Σ p_k × p_(k+1) over each path (closed by its chord), summed: a plane with unit normal
+    n sees the paths enclose the area |A·n|, largest along A."""
+    total = np.zeros(3)
+    for p in paths:
+        p = p[np.all(np.isfinite(p), axis=1)]
+        if len(p) > 2:
+            total += 0.5 * np.sum(np.cross(p, np.roll(p, -1, axis=0)), axis=0)
+    return total
+
+
+def _view_basis(points: np.ndarray, paths=()):
+    """A view direction v and a screen basis: along the paths' area vector (the view in which
+    the orbits enclose the largest area, so that none is seen edge-on as a line), turned to
+    the side of their mean; paths that enclose no area (a point, a short arc) are seen along
+    their mean point, tilted a little to an oblique direction."""
     mean = points.mean(axis=0) if len(points) else np.zeros(3)
+    scale = max(1.0, np.max(np.abs(points)) if len(points) else 1.0)
+    area = area_vector(paths)
     oblique = np.array([1.0, 0.8, 0.9]) / np.linalg.norm([1.0, 0.8, 0.9])
     norm = np.linalg.norm(mean)
-    if norm > 1e-12 * max(1.0, np.max(np.abs(points)) if len(points) else 1.0):
+    if np.linalg.norm(area) > 1e-6 * scale**2:
+        v = area / np.linalg.norm(area)
+        v = -v if v @ mean < 0 else v
+    elif norm > 1e-12 * scale:
         direction = mean / norm
         tilt = oblique - (oblique @ direction) * direction  # tilt the view off the mean a little
         tilt_norm = np.linalg.norm(tilt)
         v = direction if tilt_norm < 1e-12 else 0.8 * direction + 0.6 * tilt / tilt_norm
     else:
         v = oblique
-    v /= np.linalg.norm(v)
+    v = v / np.linalg.norm(v)
     up = np.array([0.0, 0.0, 1.0])
     if abs(v @ up) > 0.95:
         up = np.array([0.0, 1.0, 0.0])
@@ -111,7 +130,8 @@ def _sphere_panel(ax, sphere: Sphere):
                                                 at=_on_sphere(c.at, radius)) for c in sphere.curves])
     everything = np.concatenate([c.points for c in sphere.curves] + [c.dense for c in sphere.curves
                                                                      if c.dense is not None])
-    v, e1, e2 = _view_basis(everything[np.all(np.isfinite(everything), axis=1)])
+    v, e1, e2 = _view_basis(everything[np.all(np.isfinite(everything), axis=1)],
+                            [c.dense if c.dense is not None else c.points for c in sphere.curves])
     ax.add_patch(matplotlib.patches.Circle((0, 0), radius, facecolor="#f4f6fa", edgecolor="0.3", lw=1.0, zorder=0))
     if sphere.levels is not None:
         g = np.linspace(-1, 1, 301) * radius

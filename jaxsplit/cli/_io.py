@@ -3,12 +3,13 @@
 A command *claims* its outputs before any work: each path is resolved
 (``Path.resolve()``: ``a/../run.npz``, ``./run.npz`` and a symlink to it are one file),
 compared with the command's other outputs by that resolved file (and by inode for hard
-links), checked (a regular file or nothing; no overwriting without ``--force``; a name
-the file system accepts; a writable directory) and *locked* (``flock`` on a lock file
+links), checked (a regular file, a symlink or nothing; no overwriting without ``--force``;
+a name the file system accepts; a writable directory) and *locked* (``flock`` on a lock file
 next to it, or inside an output directory), so a second run into the same output exits
 with status 2 instead of mixing its numbers with the first one's. Writing is atomic (a
-temporary file in the same directory, ``fsync``, ``os.replace``) and runs in the signal
-policy's ``critical`` mode, so a file is complete or absent, never half-written. Locks
+temporary file in the same directory, ``fsync``, ``os.replace`` onto the output's
+own name: a symlink there is replaced, never written through into its target) and runs
+in the signal policy's ``critical`` mode, so a file is complete or absent, never half-written. Locks
 and temporary files are removed when the command ends, also when it is abandoned.
 """
 
@@ -85,38 +86,44 @@ class Outputs:
 
     # ------------------------------------------------------------------ claims
     def file(self, path, what: str, *, force: bool | None = None) -> Path:
-        """Claim an output file: resolved, distinct from the other outputs, writable, locked,
-        and not existing unless ``force`` (default: the command's ``--force``)."""
+        """Claim an output file: distinct from the other outputs, writable, locked, and not
+        existing unless ``force`` (default: the command's ``--force``). Returns the name to
+        write: its directory resolved, its last name kept, so that a symlink there is
+        replaced by the output, never written through into the file it points to."""
         force = self.force if force is None else force
         shown = os.fspath(path)
-        p = resolve(path, what)
+        p = resolve(path, what)  # the file the name reaches now: compared with the other outputs
         given = Path(shown).expanduser()
-        if os.path.isdir(p) or shown.endswith(("/", os.sep)):
+        if os.path.isdir(p) or shown.endswith(("/", os.sep)) or given.name in ("", ".", ".."):
             raise InputError(f"{what} path {shown!r} is a directory; give a file name")
         for other, other_what in self._files.items():
-            if other == p or (os.path.exists(p) and os.path.exists(other) and os.path.samefile(other, p)):
+            reached = other.resolve()
+            if reached == p or (os.path.exists(p) and os.path.exists(reached) and os.path.samefile(reached, p)):
                 raise InputError(f"{what} {shown!r} is the same file as the {other_what} ({str(other)!r}); "
                                  "give them different names")
-        parent = p.parent
+        parent = resolve(given.parent, what)
         if not os.path.exists(parent):
             raise InputError(f"cannot write {what} {shown!r}: directory {str(parent)!r} does not exist")
         if not os.path.isdir(parent):
             raise InputError(f"cannot write {what} {shown!r}: {str(parent)!r} is not a directory")
+        target = parent / given.name
         if parent not in self._dirs:  # a claimed directory's lock already covers its files
-            lock = parent / f"{TEMP_PREFIX}lock-{hashlib.sha256(os.fsencode(p.name)).hexdigest()[:16]}"
+            lock = parent / f"{TEMP_PREFIX}lock-{hashlib.sha256(os.fsencode(target.name)).hexdigest()[:16]}"
             self._lock(lock, f"{what} {shown!r}")
-        if (os.path.exists(p) or os.path.islink(given)) and not force:
+        if os.path.lexists(target) and not force:
             raise InputError(f"{what} file {shown!r} exists; pass --force to overwrite it or choose another path")
-        if os.path.exists(p) and not stat.S_ISREG(os.stat(p).st_mode):
+        if os.path.lexists(target) and not (stat.S_ISREG(os.lstat(target).st_mode) or os.path.islink(target)):
             raise InputError(f"{what} {shown!r} exists and is not a regular file; it is never replaced")
-        self._files[p] = what
-        return p
+        self._files[target] = what
+        return target
 
-    def directory(self, path, what: str) -> Path:
-        """Claim an output directory (created if missing) and lock it: the files inside it
-        are the command's to write."""
+    def directory(self, path, what: str, *, resume: bool = False) -> Path:
+        """Claim an output directory (created if missing; with ``resume`` it must exist) and
+        lock it: the files inside it are the command's to write."""
         shown = os.fspath(path)
         p = resolve(path, what)
+        if resume and not os.path.isdir(p):
+            raise InputError(f"nothing to resume: {what} {shown!r} does not exist; run without --resume to start")
         if os.path.exists(p) and not os.path.isdir(p):
             raise InputError(f"{what} {shown!r} exists and is not a directory")
         for other, other_what in self._dirs.items():
@@ -162,7 +169,7 @@ class Outputs:
 
     # ------------------------------------------------------------------ writing
     def _check_claimed(self, path: Path) -> Path:
-        p = Path(path).resolve()
+        p = Path(path).parent.resolve() / Path(path).name  # a symlink as the last name is replaced, not followed
         if p not in self._files and p.parent not in self._dirs:
             raise RuntimeError(f"{p} was not claimed before writing")  # a bug, not bad input
         return p

@@ -7,9 +7,9 @@ interpreter's teardown then runs under those threads (``fit`` interrupted during
 *recorded*, and what happens next depends on the mode of the moment:
 
 * ``abandon`` (the default; nothing finished would be lost: parsing, compiling, ``check``,
-  ``fit``, the paper audit): the process ends at once with exit status 130 through
-  ``os._exit`` (no teardown racing XLA's threads), after the registered clean-ups (lock
-  files, temporary files);
+  ``fit``, a claim of the paper audit, whose finished claims are already written): the
+  process ends at once with exit status 130 through ``os._exit`` (no teardown racing XLA's
+  threads), after the registered clean-ups (lock files, temporary files, what is kept);
 * ``defer`` (finished work to keep: the chunks of ``simulate`` and ``sweep``): the command
   looks at ``requested`` between compiled calls, stops, writes what is finished and exits
   130; a second signal abandons;
@@ -22,6 +22,9 @@ delivery, in the mode of that moment) or, when the main thread has not run Pytho
 ``STUCK_SECONDS`` because it waits inside one long compiled call, a helper thread (the
 main thread's mode cannot change while it waits). So Ctrl-C ends a fit at once even in the
 middle of an XLA computation.
+
+When ``main`` is the process, it ends through ``end_process``: the signals are blocked,
+one that came at any moment makes the status 130, and no teardown follows.
 
 A signal that was ignored when the process started (``nohup``, background jobs) stays
 ignored, as Python itself does for SIGINT.
@@ -43,8 +46,8 @@ STUCK_SECONDS = 0.2  # a signal byte left unread this long: the main thread is i
 class Interrupted(Exception):
     """Raised by ``Policy.check`` at a safe point once a deferred signal has arrived."""
 
-    def __init__(self, signum: int):
-        self.signum = signum
+    def __init__(self, signum: int, detail: str = "nothing was left half-written"):
+        self.signum, self.detail = signum, detail  # detail "": the command already said what it kept
         super().__init__(signal.Signals(signum).name)  # "SIGINT", "SIGTERM"
 
 
@@ -164,12 +167,10 @@ class Policy:
             self._watcher.start()
         return self
 
-    def restore(self, *, ignore: bool = False):
-        """Put the previous handlers back, or with ``ignore`` ignore the signals from now on
-        (the process is about to exit with its status decided: a late signal must not turn
-        it into a KeyboardInterrupt during teardown)."""
+    def restore(self):
+        """Put the previous handlers back."""
         for sig, previous in self._previous.items():
-            signal.signal(sig, signal.SIG_IGN if ignore else previous)
+            signal.signal(sig, previous)
         self._previous = {}
         if self._pipe is not None:
             read_fd, write_fd, old, stop_read, stop_write = self._pipe
@@ -181,20 +182,45 @@ class Policy:
                 os.close(fd)
 
 
+def _pending() -> set:
+    return set(signal.sigpending()) & set(SIGNALS)
+
+
+def end_process(status: int, stop: Policy):
+    """End the process now: with ``status``, or 130 when a signal arrived at any moment
+    before it is gone (the documented status of an interrupted run, also for a signal that
+    comes after the last output is written). The signals are blocked first, so one arriving
+    from then on stays pending, or (taken by another thread) left its byte in the wakeup pipe,
+    and is counted here; no interpreter teardown follows (a signal there was once ignored,
+    turning 130 into 0 in 6 runs of 10). Only a signal after ``os._exit`` (the kernel
+    releasing the process) finds the status decided."""
+    signal.pthread_sigmask(signal.SIG_BLOCK, SIGNALS)  # this thread's mask: XLA's threads may still take one,
+    for stream in (sys.stdout, sys.stderr):  # and then its byte is in the wakeup pipe
+        with contextlib.suppress(Exception):  # e.g. a closed pipe
+            stream.flush()
+    late = stop.received
+    if late is None:
+        late = next(iter(stop._read()), None) or min(_pending(), default=None)
+    if late is not None and status == 0:
+        os.write(2, f"jaxsplit: interrupted ({signal.Signals(late).name}) after the work was done; "
+                    "every output is complete\n".encode())
+        status = EXIT_INTERRUPTED
+    os._exit(status)
+
+
 _CURRENT: list[Policy] = []
 
 
 @contextlib.contextmanager
-def policy(*, owns_process: bool = False):
-    """Install the policy for one command-line run (``main``); afterwards restore the
-    handlers, or, when the run is the whole process, ignore the signals until it exits."""
+def policy():
+    """Install the policy for one command-line run (``main``); afterwards restore the handlers."""
     p = Policy().install()
     _CURRENT.append(p)
     try:
         yield p
     finally:
         _CURRENT.pop()
-        p.restore(ignore=owns_process)
+        p.restore()
 
 
 def current() -> Policy:

@@ -7,9 +7,11 @@
   elliptic solution of the free body, with or without its attitude; else a Kahan–Li 8 run
   refined until it agrees with half its steps, its own error reported). The ladder is
   chosen for the scheme: a probe over step counts 1, 2, 4, ..., 8192 finds where the errors
-  lie between round-off and ``UPPER``, then 14 step counts over a factor 8 around the
-  smallest such step size (every ladder through one compilation, ``roll``). The order is the log-log slope
-  over the smallest usable step sizes (within a factor ``TAIL``): the most asymptotic
+  lie between round-off and ``UPPER``, then up to 14 step counts over a factor 4 around the
+  smallest such step size (distinct integers: fewer where the counts are small; every ladder
+  through one compilation, ``roll``; the output states the ladder run). The order is the
+  log-log slope over the smallest usable step sizes (within a factor ``TAIL``, at least
+  ``MIN_FIT_POINTS`` of them, else not measurable here): the most asymptotic
   points above round-off (``ROUNDOFF`` ε |x| √n, ~10x the round-off measured at T = 10,
   or 10x the reference's error). It agrees when it is within ``ORDER_TOL`` of the nominal
   order. When the local slope is still changing as the errors reach round-off (the
@@ -35,8 +37,10 @@ ORDER_TOL = 0.3  # |measured - nominal order| allowed
 ROUNDOFF = 200  # errors below ROUNDOFF eps |x| sqrt(n) are round-off dominated (~20 eps sqrt(n) measured at T = 10)
 UPPER = 1e-4  # errors above UPPER |x| are pre-asymptotic
 TAIL = 2.0  # the fit uses the usable step sizes within this factor of the smallest one
+MIN_FIT_POINTS = 5  # distinct step counts the fit needs in that window (else: not measurable here)
 PROBE = tuple(2**k for k in range(14))  # 1 .. 8192 steps
-FINE_POINTS = len(PROBE)  # step counts over a factor 8 around the asymptotic window (the probe's shape)
+FINE_POINTS = len(PROBE)  # step counts over a factor 4 around the asymptotic window (the probe's shape):
+# ~6 of them within the fit's factor TAIL = 2 (over a factor 8, as before, 4 or 5)
 EXIT_FAILED = 1
 
 EXAMPLES = """\
@@ -125,16 +129,25 @@ def _slope(hs, errs, mask):
 
 
 def _fit(counts, hs, errs, window):
-    """(order over the tail, order over the window before it, mask of the tail) or None."""
+    """(order over the tail, order over the window before it, mask of the tail), or None when
+    fewer than ``MIN_FIT_POINTS`` step counts lie in the tail (the asymptotic window)."""
     usable = window.usable(counts, errs)
-    if usable.sum() < 3:
+    if not usable.any():
         return None
     h_min = hs[usable].min()
     tail = usable & (hs <= TAIL * h_min * (1 + 1e-12))
-    if tail.sum() < 3:
-        tail = usable & (hs <= np.sort(hs[usable])[2] * (1 + 1e-12))
+    if tail.sum() < MIN_FIT_POINTS:
+        return None
     before = usable & (hs > TAIL * h_min * (1 + 1e-12)) & (hs <= TAIL**2 * h_min * (1 + 1e-12))
     return _slope(hs, errs, tail), _slope(hs, errs, before), tail
+
+
+def _window_counts(counts, hs, errs, window):
+    """The step counts in the fit's window (usable, within TAIL of the smallest usable h)."""
+    usable = window.usable(counts, errs)
+    if not usable.any():
+        return counts[usable]
+    return counts[usable & (hs <= TAIL * hs[usable].min() * (1 + 1e-12))]
 
 
 def _fine(lo: int, hi: int):
@@ -160,7 +173,7 @@ def measure_order(step, x0, t_end, reference, window, start=None):
                             "so no order can be measured"}
         if usable.any():
             top = int(counts[usable].max())
-            fine = _fine(top // 4, 2 * top)
+            fine = _fine(top // 2, 2 * top)
         elif np.all(~finite | (errs >= UPPER * window.scale)):  # slow convergence: longer ladders
             more = _errors(step, x0, t_end, [2**k for k in range(14, 18)], reference)
             ladders.append(more)
@@ -170,7 +183,7 @@ def measure_order(step, x0, t_end, reference, window, start=None):
                         "note": f"the errors stay above {UPPER:g} x |x| up to {MAX_COUNT:,} steps (min "
                                 f"{np.nanmin(more[2]):.1e}): give a shorter --t-end"}
             top = int(more[0][usable].max())
-            fine = _fine(top // 4, 2 * top)
+            fine = _fine(top // 2, 2 * top)
         else:  # from above the window to round-off within one doubling: resolve the jump
             above = counts[finite & (errs >= UPPER * window.scale)]
             lo = int(above.max()) if above.size else 1
@@ -179,13 +192,31 @@ def measure_order(step, x0, t_end, reference, window, start=None):
     counts, hs, errs = _merged(ladders) if start is None else ladders[-1]
     fitted = _fit(counts, hs, errs, window)
     if fitted is None or fitted[0] is None:
+        inside = _window_counts(counts, hs, errs, window)
+        where = f" ({', '.join(map(str, inside))})" if inside.size else ""
         return {"ladders": ladders, "order": None, "exact": False,
-                "note": f"only {int(window.usable(counts, errs).sum())} of the step counts {counts[0]}..{counts[-1]} "
-                        f"give errors between round-off and {UPPER:g} x |x| (errors {np.nanmin(errs):.1e} .. "
-                        f"{np.nanmax(errs):.1e}); the asymptotic regime is not resolved here"
-                        + ("; try another --start" if start is not None else "")}
+                "note": f"only {inside.size} of the step counts {counts[0]}..{counts[-1]}{where} give errors between "
+                        f"round-off and {UPPER:g} x |x| within a factor {TAIL:g} of the smallest such step size; the "
+                        f"fit needs {MIN_FIT_POINTS} (errors {np.nanmin(errs):.1e} .. {np.nanmax(errs):.1e}): a "
+                        "longer --t-end puts more step counts there"
+                        + ("; or try another --start" if start is not None else "")}
     order, before, tail = fitted
     return {"ladders": ladders, "order": order, "order_before": before, "used": tail, "exact": False, "note": None}
+
+
+def _ladder_text(ladders, start) -> str:
+    """The step counts actually run, in words (the fine ladder has fewer than FINE_POINTS
+    counts where they are small integers)."""
+    def span(c):
+        return f"{len(c)} step counts {c[0]}..{c[-1]}"
+
+    if start is not None:
+        return f"--start {start}: {span(ladders[0][0])} over a factor {LADDER_FACTOR}"
+    parts = [f"probe {span(ladders[0][0])} (doubling)"]
+    parts += [f"then {span(c)}" for c, _, _ in ladders[1:]]
+    return ", ".join(parts) + (f"; the order is the slope over the counts with errors between round-off and "
+                               f"{UPPER:g} x |x| within a factor {TAIL:g} of the smallest such step size "
+                               f"(>= {MIN_FIT_POINTS} needed)")
 
 
 def _merged(ladders):
@@ -367,7 +398,7 @@ def run(args):
         "t_end": args.t_end, "step_counts": counts, "step_sizes": hs, "errors": errs,
         "used": used, "probe": None if args.start is not None else {"step_counts": measured["ladders"][0][0],
                                                                     "errors": measured["ladders"][0][2]},
-        "reference": ref_kind, "reference_accuracy": ref_acc,
+        "reference": ref_kind, "reference_accuracy": ref_acc, "ladder": _ladder_text(measured["ladders"], args.start),
     }
     with _signals.current().critical():  # the measurements are done: print them whole
         _print(args, result)
@@ -389,8 +420,10 @@ def _print(args, r):
     if p is not None:
         used = np.asarray(counts)[np.asarray(r["used"])]
         word = {"agrees": "agrees", "disagrees": "DISAGREES", "not measurable": "not measurable here"}[r["order_verdict"]]
-        print(f"  measured order {p:.3f} from {r['order_points_used']} step counts ({used.min()}..{used.max()}) to "
-              f"t = {r['t_end']:g} -> {word} (tolerance {ORDER_TOL})")
+        hs_used = np.asarray(r["step_sizes"])[np.asarray(r["used"])]
+        print(f"  measured order {p:.3f} from {r['order_points_used']} step counts ({used.min()}..{used.max()}, "
+              f"h = {hs_used.max():.3g}..{hs_used.min():.3g}) to t = {r['t_end']:g} -> {word} (tolerance {ORDER_TOL})")
+    print(f"  ladder: {r['ladder']}")
     if r["order_note"]:
         print(f"  order {'not measurable here' if r['order_verdict'] != 'exact' else 'not measured'}: "
               f"{r['order_note']}")

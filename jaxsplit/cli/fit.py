@@ -1,5 +1,5 @@
 """``jaxsplit fit``: recover a body's parameters from an observed trajectory (a file in the
-format ``simulate`` writes, ``_data``: .npz or .csv).
+format ``simulate`` writes, read by ``_data``: .npz or .csv).
 
 Free rigid body (t, m): m(t) determines only the differences 1/I_i − 1/I_j; one more
 number fixes the rest (the gauge): the kinetic energy (``--energy``, or the file's
@@ -39,6 +39,13 @@ MAX_MODEL_STEPS = 10**6
 # A Gauss–Newton eigenvalue below this fraction of the largest is a direction the data do not fix.
 NULL_RATIO = 1e-10
 
+# Each fit integrates the model from its fitted initial state (3 numbers) through the times: fewer
+# than this many observations cannot test it (jaxsplit.fit_inertia refuses them as well).
+MIN_OBSERVATIONS = 4
+
+DESCRIPTION = (f"Recover a body's parameters from an observed trajectory: a .npz or .csv file in the format "
+               f"`jaxsplit simulate --out` writes, with at least {MIN_OBSERVATIONS} observation times.")
+
 EXAMPLES = """examples:
   jaxsplit fit --data obs.npz                    # free body; the file's energy (if any) fixes the gauge
   jaxsplit fit --data obs.csv --energy 0.65 --energy-sigma 1e-3 --json
@@ -53,7 +60,7 @@ def add_parser(sub):
     import argparse
 
     p = sub.add_parser("fit", help="fit inertia (and a heavy top's centre of mass) to an observed trajectory",
-                       description=__doc__.split(": ", 1)[1].split("\n\n")[0].replace("``", ""), epilog=EXAMPLES,
+                       description=DESCRIPTION, epilog=EXAMPLES,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--data", required=True, help="trajectory file (.npz or .csv, as `jaxsplit simulate` writes)")
     p.add_argument("--system", choices=("auto", "rigid-body", "heavy-top"), default="auto",
@@ -109,6 +116,9 @@ def load_observations(path: str):
     for name, arr in (("t", t), *states.items()):
         if not np.all(np.isfinite(arr)):
             raise InputError(f"{path}: {name} must be finite, found {int(np.sum(~np.isfinite(arr)))} NaN/inf")
+    if len(t) < MIN_OBSERVATIONS:
+        raise InputError(f"{path}: {len(t)} observation time{'s' if len(t) != 1 else ''}; fit needs at least "
+                         f"{MIN_OBSERVATIONS} (e.g. jaxsplit simulate --save-at 0.5,1,1.5,2,2.5,3 --out FILE)")
     energy, inertia1 = (_scalar(arrays, k, path, len(t)) for k in ("energy", "inertia1"))
     return t, states, energy, inertia1, meta
 
@@ -142,17 +152,32 @@ def run(args):
         print("jaxsplit: note: --system rigid-body fits m(t) only; the file's gamma is not used", file=sys.stderr)
     if args.energy is not None and args.inertia1 is not None:
         raise InputError("give --energy or --inertia1 (one gauge), not both")
+    source = None
     if args.energy is not None:  # an option overrides the file's gauge (of either kind)
-        energy, inertia1 = args.energy, None
+        energy, inertia1, source = args.energy, None, "--energy"
     elif args.inertia1 is not None:
-        energy, inertia1 = None, args.inertia1
-    elif energy is not None and inertia1 is not None:
-        inertia1 = None  # the file's energy wins: it is what simulate writes
+        energy, inertia1, source = None, args.inertia1, "--inertia1"
+    elif energy is not None:  # the file's energy wins over its inertia1: it is what simulate writes
+        inertia1, source = None, _file_energy_source(args.data, meta)
+    elif inertia1 is not None:
+        source = f"the file's inertia1 ({args.data})"
+    with_energy = "with an energy gauge (--energy, or an energy in the data file)"
+    _args.refuse_unused(args, {"energy_sigma": (energy is not None, with_energy)})
     res = fit_inertia(t, states["m"], energy=energy, energy_sigma=args.energy_sigma, inertia1=inertia1,
                       fit_m0=not args.fixed_m0, scheme=scheme, max_step=args.max_step)
     with _signals.current().critical():  # the fit is done: print it whole
-        _print(args, res, t)
+        _print(args, res, t, source)
     return 0
+
+
+def _file_energy_source(path, meta) -> str:
+    """Where a file's energy came from, in words: simulate computes it from the states before
+    any --noise, so it is exact only for synthetic data (and its sigma 0 means just that)."""
+    if meta.get("command") == "simulate":
+        noisy = f" before its --noise {meta['noise']:g} was added" if meta.get("noise") else ""
+        return (f"the file's energy ({path}), computed by jaxsplit simulate from its states{noisy}: exact "
+                "only for synthetic data; for measured data give --energy E --energy-sigma S")
+    return f"the file's energy ({path}), taken as exact (--energy-sigma S gives its uncertainty)"
 
 
 def _assumed(res) -> bool:
@@ -164,7 +189,7 @@ def _gauge_text(res) -> str:
     return res.gauge.replace("pass energy= or inertia1=", "pass --energy or --inertia1")
 
 
-def _print(args, res, t):
+def _print(args, res, t, source=None):
     assumed = _assumed(res)
     if args.json:
         out = {
@@ -181,6 +206,7 @@ def _print(args, res, t):
             "iterations": res.iterations,
             "gauge": _gauge_text(res),
             "gauge_assumed": assumed,
+            "gauge_source": source,
             # null = unbounded (JSON has no infinity)
             "ratio_range_from_m_alone": [[v if math.isfinite(v) else None for v in row]
                                          for row in res.ratio_range.tolist()],
@@ -193,7 +219,7 @@ def _print(args, res, t):
           f"{res.iterations} iterations, loss {res.loss:.3e}, noise sigma {res.noise_sigma:.3e}")
     d, ds = res.inverse_differences, res.inverse_differences_std
     print(f"  measured: 1/I1 - 1/I3 = {d[0]:.6f} +- {ds[0]:.2e}, 1/I2 - 1/I3 = {d[1]:.6f} +- {ds[1]:.2e}")
-    print(f"  gauge: {_gauge_text(res)}")
+    print(f"  gauge: {_gauge_text(res)}" + (f", from {source}" if source else ""))
     lo, hi = res.ratio_range
     if assumed:
         print(f"  I2/I1 = {r[0]:.6f}, I3/I1 = {r[1]:.6f} under the assumed gauge: not measured (no uncertainty); "
@@ -216,9 +242,14 @@ def heavy_top_family(params):
     return HeavyTop(jnp.exp(params["log_inertia"]), params["moment"], 1.0)
 
 
-def heavy_top_start(t, m, gamma):
-    """(1/I, weight·χ) by integral matching: ṁ = m × (w ⊙ m) + Γ × μ and Γ̇ = Γ × (w ⊙ m) are
-    linear in (w, μ); the trapezoid rule over each interval gives a least-squares problem."""
+PARAMETERS = ("1/I1", "1/I2", "1/I3", "weight x centre of mass x", "weight x centre of mass y",
+              "weight x centre of mass z")
+DEGENERATE = 1e-12  # a singular value of the integral-matching system at round-off: exactly undetermined
+
+
+def _matching_system(t, m, gamma):
+    """The integral-matching least squares (lhs (6(n-1), 6), rhs): d(m, Γ)/dt = M (1/I, weight·χ),
+    by the trapezoid rule over each interval."""
     eye = np.eye(3)
 
     def rows(mk, gk):  # (n, 6, 6): d(m, Γ)/dt = M (w, μ)
@@ -232,6 +263,27 @@ def heavy_top_start(t, m, gamma):
     dt = np.diff(t)[:, None, None]
     lhs = (0.5 * dt * (rows(m[:-1], gamma[:-1]) + rows(m[1:], gamma[1:]))).reshape(-1, 6)
     rhs = np.concatenate([np.diff(m, axis=0), np.diff(gamma, axis=0)], axis=1).reshape(-1)
+    return lhs, rhs
+
+
+def _refuse_undetermined(path, t, m, gamma):
+    """Refuse data that leave a parameter exactly undetermined (the fit would print a number for
+    it): a null direction of the integral-matching system, to round-off."""
+    lhs, _ = _matching_system(t, m, gamma)
+    _, sv, vt = np.linalg.svd(lhs / max(np.max(np.abs(lhs)), 1e-300))
+    null = vt[sv <= DEGENERATE * max(sv[0], 1e-300)]
+    if not null.size:
+        return
+    names = [PARAMETERS[k] for k in range(6) if np.any(np.abs(null[:, k]) > 0.1)]
+    why = ("gamma is 0 at every observation (gamma is the unit vertical seen from the body)"
+           if not np.any(gamma) else "gamma(t) and m(t) leave a direction of the parameters free")
+    raise InputError(f"{path}: these data do not determine {', '.join(names)}: {why}; nothing fitted")
+
+
+def heavy_top_start(t, m, gamma):
+    """(1/I, weight·χ) by integral matching: ṁ = m × (w ⊙ m) + Γ × μ and Γ̇ = Γ × (w ⊙ m) are
+    linear in (w, μ); the trapezoid rule over each interval gives a least-squares problem."""
+    lhs, rhs = _matching_system(t, m, gamma)
     theta, *_ = np.linalg.lstsq(lhs, rhs, rcond=None)
     w = theta[:3]
     w = np.where(w > 1e-3 * np.max(np.abs(w)), w, 1e-3 * np.max(np.abs(w)) or 1.0)  # positive moments to start
@@ -259,8 +311,9 @@ def _run_heavy_top(args, t, states, meta, scheme):
                              "(m, gamma) without a gauge")
     weight, weight_note = _weight(args, meta)
     m, gamma = states["m"], states["gamma"]
-    if len(t) < 4 or not np.all(np.diff(t) > 0):
-        raise InputError("t must be strictly increasing with n >= 4 observations")
+    if not np.all(np.diff(t) > 0):
+        raise InputError(f"{args.data}: t must be strictly increasing")
+    _refuse_undetermined(args.data, t, m, gamma)
     w0, moment0 = heavy_top_start(t, m, gamma)
     params0 = {"log_inertia": jnp.log(1 / jnp.asarray(w0)), "moment": jnp.asarray(moment0)}
     res = fit(heavy_top_family, t, (m, gamma), params0, fit_x0=not args.fixed_m0, scheme=scheme, split="axes",

@@ -65,7 +65,7 @@ examples:
   jaxsplit simulate --system attitude --q0 1,0,0,0 --scheme kahan-li-6 --t-end 50
   jaxsplit simulate --system gravity-gradient --rate 0.5 --gamma0 1,0,0 --m0 0.1,0.2,1
   jaxsplit simulate --save-at 0.5,1,2.5 --out obs.csv  # states at those times (partial steps)
-  jaxsplit simulate --save-at 0.5,1,2.5 --noise 1e-3 --seed 1 --out obs.npz   # noisy observations
+  jaxsplit simulate --save-at 0.5,1,1.5,2,2.5,3 --noise 1e-3 --seed 1 --out obs.npz  # observations for fit
   jaxsplit simulate --dtype float32 --renormalize --scheme kahan-li-6 --steps 1e5
   jaxsplit simulate --json --no-save                  # one JSON object, no files
   jaxsplit simulate --dt -0.01 --steps 100            # backwards in time
@@ -307,8 +307,12 @@ def _plan(args, outputs) -> _Plan:
     save_every = _bounds.at_most(args.save_every, _bounds.MAX_STEPS, "--save-every", "step indices exact in float64")
     _bounds.saved_states(n_steps, save_every, _bytes_per_saved(prob), _bounds.memory_limit(args.max_memory),
                          extra=0 if at is None else len(at))
-    if args.noise > 0 and args.no_save:
-        raise InputError("--noise applies to the written trajectory, and --no-save writes none")
+    writes = "when files are written (not with --no-save)"
+    _args.refuse_unused(args, {"noise": (not args.no_save, "to the written trajectory, and --no-save writes none"),
+                               "seed": (args.noise > 0, "with --noise SIGMA > 0 (it seeds the noise)"),
+                               "figure": (not args.no_figure, "without --no-figure"),
+                               "format": (not args.no_save, writes), "force": (not args.no_save, writes),
+                               "no_figure": (not args.no_save, writes)})
     when = time.strftime("%Y%m%d-%H%M%S", time.gmtime())
     out, fmt, figure = _output_paths(args, outputs, when)
     if args.dtype == "float32":

@@ -58,8 +58,9 @@ against h, one line per inertia ratio pair: median and max over the states). Per
 energy_error = max|H/H0 - 1| and casimir_error = max|C/C0 - 1| over every step, error =
 max|m_n - m_ref(t_end)| against a high-order reference (reference_accuracy bounds its own
 error), poisson_defect of one step at m0, the step size h actually used (t_end / n_steps)
-and n_steps. An existing DIR is refused unless --resume (continue it; the inputs must be
-the same) or --force (start it over).
+and n_steps. A DIR that holds files (a sweep's or anyone's) is refused unless --resume
+(continue the sweep in it; the inputs must be the same) or --force (start the sweep over;
+files that are not the sweep's are left alone); --resume needs a sweep to continue.
 """
 
 
@@ -166,8 +167,6 @@ def _inputs(args) -> dict:
     reference = _bounds.scheme(args.reference_scheme, "--reference-scheme").name
     if args.reference_angle > 0.5:
         raise InputError(f"--reference-angle must be <= 0.5, got {args.reference_angle:g}")
-    if args.shift_axis is not None and args.split != "casimir":
-        raise InputError("--shift-axis applies only with --split casimir")
     if not s.pieces_allowed(3 if args.split == "axes" else 2):
         raise InputError(f"--scheme {scheme} is {s.form} (exactly two pieces) and does not fit "
                          "--split axes (three pieces); use --split casimir")
@@ -178,9 +177,14 @@ def _inputs(args) -> dict:
         "sampling": args.sampling, "allow_nonphysical": args.allow_nonphysical,
         "chunk_cases": args.chunk_cases,
     }
+    grid, random = args.sampling == "grid", args.sampling == "random"
+    _args.refuse_unused(args, {"shift_axis": (args.split == "casimir", "with --split casimir"),
+                               "states": (grid, "with --sampling grid"), "ratios": (grid, "with --sampling grid"),
+                               "dt": (grid, "with --sampling grid"), "samples": (random, "with --sampling random"),
+                               "seed": (random, "with --sampling random"),
+                               "ratio_range": (random, "with --sampling random (and --samples N)"),
+                               "dt_range": (random, "with --sampling random (and --samples N)")})
     if args.sampling == "grid":
-        if args.samples is not None:
-            raise InputError("--samples applies only with --sampling random")
         inputs |= {"states": args.states, "ratios": [list(r) for r in args.ratios], "dt": list(args.dt)}
     else:
         if args.samples is None:
@@ -253,12 +257,19 @@ def _prepare_dir(args, outputs, inputs, when) -> tuple[Path, bool]:
             raise InputError("--resume needs --out DIR (the directory of the sweep to continue)")
         out = _fresh_directory(outputs, f"sweep-{when}-{inputs['scheme']}")
     else:
-        out = outputs.directory(args.out, "--out directory")  # locked: a second sweep into it exits 2 here
+        out = outputs.directory(args.out, "--out directory", resume=args.resume)  # locked: a second sweep into it exits 2 here
     shown = args.out if args.out is not None else str(out)
     existing = _sweep_files(out)
+    if args.resume and not existing:
+        raise InputError(f"nothing to resume: --out {shown!r} holds no sweep; run without --resume to start one")
     if existing and not (args.resume or args.force):
         raise InputError(f"--out {shown!r} already holds a sweep; pass --resume to continue it or "
                          "--force to start it over")
+    theirs = sorted(p.name for p in out.iterdir() if p not in existing and not p.name.startswith(_io.TEMP_PREFIX)
+                    and p.name != _io.DIRECTORY_LOCK)
+    if theirs and not (args.resume or args.force):  # a directory of someone else's files: not ours to fill
+        raise InputError(f"--out {shown!r} is not empty (it holds {theirs[0]!r}{' and more' if len(theirs) > 1 else ''});"
+                         " give a new or empty directory, or --force to write the sweep beside those files")
     outputs.remove_temporaries(out)  # of a killed run (we hold the lock)
     manifest = out / MANIFEST
     if args.resume and manifest.exists():

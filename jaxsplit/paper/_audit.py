@@ -5,8 +5,9 @@ rigid body". One function per claim (``_section2``, ``_section3``, ``_section4``
 ``_section4_remarks``) MEASURES — integrations, ``jacfwd`` defects, tableau algebra,
 eigenvalues — and returns its record(s) (``_records``: the verdict words with their rules,
 the thresholds) and the data of its figure, if any. ``audit_paper`` runs the wanted claims,
-renders the figures (``_figures``) and report.md (``_report``) in memory, and hands every file
-to ``_output.write_outputs``, the one function that writes.
+renders the figures (``_figures``) and report.md (``_report``) in memory after each claim
+(``audit_steps``), and ``_output.write_audit`` writes them as they come: an interrupted audit
+keeps every finished claim, the rest marked ``not run``, and resumes.
 """
 
 import json
@@ -19,8 +20,9 @@ import numpy as np
 
 from ..core._errors import InputError
 from . import _section2, _section3, _section4, _section4_remarks
-from ._figures import figure_name, render
-from ._output import MARKER, check_out_dir, write_outputs
+from ._figures import figure_caption, figure_name, render
+from ._output import MARKER
+from ._records import NOT_RUN
 from ._report import report_markdown
 
 SECTIONS = (
@@ -67,51 +69,91 @@ def _wanted(claims):
     return wanted
 
 
+def require_x64() -> None:
+    if not jax.config.jax_enable_x64:
+        raise InputError("the paper audit measures at float64 round-off: enable jax_enable_x64 first")
+
+
+def _run_claim(claim, ctx):
+    """One claim function's (result, figure data): the unit of work the audit keeps."""
+    return claim(ctx)
+
+
+def not_run(cid: str) -> dict:
+    """The record of a claim the audit did not reach (interrupted): no verdict, no evidence."""
+    return {"id": cid, "statement": "", "verdict": NOT_RUN, "evidence": {},
+            "notes": "Not run: the audit stopped before this claim; `jaxsplit paper --out DIR --resume` runs it."}
+
+
+def audit_steps(claims=None, *, figures: bool = True, finished=()):
+    """Run the audit one claim function at a time; first and after each, yield ``{file name:
+    bytes}``: that function's figures, then report.md and ``claims.json`` of the whole audit
+    so far (every record measured, the others marked ``not run``), so that writing each
+    yield keeps every finished claim whatever stops the run next.
+
+    ``finished``: records of an earlier run (with their figures already written) whose
+    functions are not run again. Needs float64 (the CLI enables it). Writes nothing.
+    """
+    require_x64()
+    wanted = _wanted(claims)
+    done = {r["id"]: r for r in finished if r["id"] in wanted and r["verdict"] != NOT_RUN}
+    ctx, timings = {}, {}
+    todo = [(ids, claim) for ids, claim in CLAIMS
+            if any(cid in wanted and cid not in done for cid in ids)]
+    yield _report_files(wanted, done, {}, timings, figures)  # before any claim: every one not run (yet)
+    for ids, claim in todo:
+        start = time.perf_counter()
+        result, figure_data = _run_claim(claim, ctx)
+        key = "+".join(ids)
+        timings[key] = time.perf_counter() - start
+        if os.environ.get("JAXSPLIT_AUDIT_VERBOSE"):
+            print(f"{key}: {timings[key]:.1f} s", flush=True)
+        results = result if isinstance(result, list) else [result]
+        done.update({r["id"]: _jsonable(r) for r in results if r["id"] in wanted})
+        drawn = {cid: data for cid, data in (figure_data or {}).items() if cid in wanted}
+        rendered = render(drawn) if figures else {}
+        files = {name: png for name, _, png in rendered.values()}
+        yield files | _report_files(wanted, done, rendered, timings, figures)
+
+
+def _report_files(wanted, done, rendered, timings, figures) -> dict:
+    """report.md and claims.json (last) of the records ``done`` so far, in the registry's order."""
+    records = [done.get(cid) or not_run(cid) for cid in CLAIM_IDS if cid in wanted]
+    captions = {}
+    for r in records:  # a finished claim's figure: rendered now or written by an earlier step or run
+        if figures and r["verdict"] != NOT_RUN and figure_name(r["id"]) is not None:
+            captions[r["id"]] = (figure_name(r["id"]), figure_caption(r["id"]))
+    captions |= {cid: (name, caption) for cid, (name, caption, _) in rendered.items()}
+    return {"report.md": report_markdown(records, captions, timings, SECTION_OF).encode("utf-8"),
+            MARKER: json.dumps(records, indent=2, ensure_ascii=False).encode("utf-8")}
+
+
 def run_audit(claims=None, *, figures: bool = True) -> tuple[list[dict], dict]:
     """Run the audit; return (records, {file name: bytes}) with ``claims.json`` last.
 
     ``claims`` restricts the run to some ids (default: all). Needs float64
     (``jax.config.update("jax_enable_x64", True)``; the CLI does it). Writes nothing.
     """
-    if not jax.config.jax_enable_x64:
-        raise InputError("the paper audit measures at float64 round-off: enable jax_enable_x64 first")
-    wanted = _wanted(claims)
-    ctx, records, timings, drawn = {}, [], {}, {}
-    for ids, claim in CLAIMS:
-        if not any(cid in wanted for cid in ids):
-            continue
-        start = time.perf_counter()
-        result, figure_data = claim(ctx)
-        timings["+".join(ids)] = time.perf_counter() - start
-        if os.environ.get("JAXSPLIT_AUDIT_VERBOSE"):
-            print(f"{'+'.join(ids)}: {timings['+'.join(ids)]:.1f} s", flush=True)
-        results = result if isinstance(result, list) else [result]
-        records += [_jsonable(r) for r in results if r["id"] in wanted]
-        drawn.update({cid: data for cid, data in (figure_data or {}).items() if cid in wanted})
-    order = {c: i for i, c in enumerate(CLAIM_IDS)}
-    records.sort(key=lambda r: order[r["id"]])
-    rendered = render(drawn) if figures else {}
-    files = {name: png for name, _, png in rendered.values()}
-    captions = {cid: (name, caption) for cid, (name, caption, _) in rendered.items()}
-    files["report.md"] = report_markdown(records, captions, timings, SECTION_OF).encode("utf-8")
-    files[MARKER] = json.dumps(records, indent=2, ensure_ascii=False).encode("utf-8")
-    return records, files
+    files = {}
+    for step in audit_steps(claims, figures=figures):
+        files = {k: v for k, v in files.items() if k not in step} | step  # claims.json stays last
+    return json.loads(files[MARKER]), files
 
 
-def audit_paper(out_dir, claims=None, *, figures: bool = True, force: bool = False) -> list[dict]:
+def audit_paper(out_dir, claims=None, *, figures: bool = True, force: bool = False,
+                resume: bool = False) -> list[dict]:
     """Run the audit, write ``out_dir/claims.json``, ``out_dir/report.md`` and figures; return the records.
 
-    ``claims`` restricts the run to some ids (default: all). The directory is checked before
-    any work; every file is written atomically, ``claims.json`` last (its presence means a
-    complete audit). ``jaxsplit paper`` writes the same files through the CLI's one writer
-    (resolved paths, a lock on the directory).
+    ``claims`` restricts the run to some ids (default: all). The directory is checked and
+    locked before any work; after each claim the files are rewritten atomically (the claims
+    not reached yet marked ``not run``), so an interrupted audit keeps every finished claim
+    and ``resume=True`` runs only the rest. ``jaxsplit paper`` is this function.
 
     >>> import tempfile, jaxsplit
     >>> out = tempfile.mkdtemp()
     >>> [(r["id"], r["verdict"]) for r in jaxsplit.audit_paper(out, ["stages"], figures=False)]
     [('stages', 'corrected')]
     """
-    out_dir = check_out_dir(out_dir, force)
-    records, files = run_audit(claims, figures=figures)
-    write_outputs(out_dir, files)
-    return records
+    from ._output import write_audit
+
+    return write_audit(out_dir, claims, figures=figures, force=force, resume=resume)

@@ -174,6 +174,11 @@ def figure_name(cid: str) -> str | None:
     return _PLOTS[cid][1] if cid in _PLOTS else None
 
 
+def figure_caption(cid: str) -> str | None:
+    """The caption of a claim's figure (``None`` when it draws none)."""
+    return _PLOTS[cid][2] if cid in _PLOTS else None
+
+
 def render(figures: dict) -> dict:
     """{claim id: data} -> {claim id: (file name, caption, PNG bytes)}."""
     out = {}

@@ -17,6 +17,7 @@ VERDICTS = {
     "not-checkable": "the claim has no numerical content, or the measurements do not decide it",
 }
 
+NOT_RUN = "not run"  # not a verdict: the record of a claim an interrupted audit did not reach
 ROUND_OFF = 1e-12  # a structure defect at or below this is round-off (float64, O(1) states)
 STRUCTURE_FLOOR = 1e-9  # a defect above this is a real violation, not round-off
 ORDER_TOL = 0.3  # measured order within this of the claimed one

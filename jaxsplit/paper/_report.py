@@ -5,7 +5,7 @@ digits; the full precision is in claims.json) and its figure, each figure once."
 import math
 import re
 
-from ._records import ORDER_TOL, ROUND_OFF, VERDICTS
+from ._records import NOT_RUN, ORDER_TOL, ROUND_OFF, VERDICTS
 
 _SUBSCRIPT = re.compile(r"(?:(?<=[\u0370-\u03ff])|(?<=\b[A-Z]))_(?=[^\W_](?![^\W_]))")  # Π_0, ω_k, X_F
 _LABELS = (("condition_2_7", "(2.7)"),)  # evidence keys spelt for code -> for a reader
@@ -88,18 +88,22 @@ def report_markdown(records, figures, timings, section_of) -> str:
     title = "# Audit of the seed paper (Hedrea, Lie–Trotter integrator for the symmetric free rigid body)"
     lines = [title, "", intro, "", "Verdicts and their rules:", ""]
     lines += [f"- **{word}**: {rule}" for word, rule in VERDICTS.items()]
+    if any(r["verdict"] == NOT_RUN for r in records):
+        rule = ("no verdict: the audit stopped before this claim (`jaxsplit paper --out DIR --resume` runs the "
+                "claims not run and keeps the others)")
+        lines += [f"- **{NOT_RUN}**: {rule}"]
     lines += ["", "| id | verdict | claim |", "|---|---|---|"]
     lines += [f"| {r['id']} | **{r['verdict']}** | {_esc(r['statement'])} |" for r in records]
     counts = {}
     for r in records:
         counts[r["verdict"]] = counts.get(r["verdict"], 0) + 1
-    lines += ["", "Totals: " + ", ".join(f"{counts[w]} {w}" for w in VERDICTS if w in counts) + ".", ""]
+    lines += ["", "Totals: " + ", ".join(f"{counts[w]} {w}" for w in (*VERDICTS, NOT_RUN) if w in counts) + ".", ""]
     section = None
     for r in records:
         if section_of[r["id"]] != section:
             section = section_of[r["id"]]
             lines += [f"## {section}", ""]
-        lines += [f"### {r['id']} — {r['verdict']}", "", f"> {r['statement']}", ""]
+        lines += [f"### {r['id']} — {r['verdict']}", ""] + ([f"> {r['statement']}", ""] if r["statement"] else [])
         if r.get("notes"):
             lines += [r["notes"], ""]
         lines += _evidence_lines(r["evidence"])
@@ -107,8 +111,12 @@ def report_markdown(records, figures, timings, section_of) -> str:
             name, caption = figures[r["id"]]
             lines += ["", f"![{caption}]({name})", "", f"*{caption}*"]
         lines.append("")
-    if timings:
+    kept = [r["id"] for r in records if r["verdict"] != NOT_RUN and not any(r["id"] in k.split("+") for k in timings)]
+    if timings or kept:
         total = sum(timings.values())
-        lines += ["## Run time per claim (s)", "",
-                  ", ".join(f"{k} {v:.1f}" for k, v in timings.items()) + f"; total {total:.0f} s.", ""]
+        lines += ["## Run time per claim (s)", ""]
+        if timings:
+            lines += [", ".join(f"{k} {v:.1f}" for k, v in timings.items()) + f"; total {total:.0f} s.", ""]
+        if kept:
+            lines += [f"Kept from an earlier run (resumed): {', '.join(kept)}.", ""]
     return "\n".join(lines)
