@@ -28,6 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..core._errors import InputError
+from ..core._integrate import step_size
 from ..core._state import as_state, float_dtype, leading_size, ravel
 
 
@@ -51,7 +52,7 @@ def _map(step, x, h):
 def _flat_map(step, x, h):
     """(flat x, Φ on flat vectors, unravel) for a map of any PyTree state."""
     flat, unravel = ravel(x)
-    h = jnp.asarray(h, dtype=flat.dtype)
+    h = jnp.asarray(step_size(h), dtype=flat.dtype)
     return flat, (lambda v: ravel(step(unravel(v), h))[0]), unravel
 
 
@@ -222,6 +223,8 @@ def _sample(xs, hs):
     hs = jnp.broadcast_to(jnp.asarray(hs, dtype=dtype), (n,)) if jnp.ndim(hs) == 0 else jnp.asarray(hs, dtype)
     if hs.shape != (n,):
         raise InputError(f"need one step size per state ({n}) or a scalar, got shape {hs.shape}")
+    if not isinstance(hs, jax.core.Tracer) and not bool(jnp.all(jnp.isfinite(hs))):
+        raise InputError(f"step sizes must be finite, got {np.asarray(hs)[~np.isfinite(np.asarray(hs))][:3].tolist()}")
     return xs, hs
 
 

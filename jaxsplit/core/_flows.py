@@ -107,6 +107,16 @@ class AbstractFlow(eqx.Module):
         what the reversible adjoint needs to rebuild states by stepping back."""
         return self.is_group
 
+    def check_state(self, x):
+        """Refuse (``InputError``) a concrete state this flow would integrate to garbage that
+        still looks fine (an attitude that is no rotation); traced values pass. ``integrate``
+        calls it on the initial state. Default: the checks of the flows this one is made of
+        (a composition's pieces), each kind once."""
+        for flow in _unique(_leaf_flows(self)):
+            if flow is not self:
+                flow.check_state(x)
+        return x
+
     def step_back(self, x_after, t, ct_after):
         """One call of the reversible adjoint's backward pass: the state before this flow,
         x = φ_{−t}(x_after), and the cotangent ``ct_after`` pulled back through φ_t at x:
@@ -123,6 +133,36 @@ class AbstractFlow(eqx.Module):
         _, pullback = jax.vjp(lambda p, y, s: join_parameters(p, static)(y, s), parameters, x, t)
         ct_parameters, ct_x, ct_t = pullback(ct_after)
         return x, ct_x, ct_parameters, ct_t
+
+
+def sub_flows(module):
+    """The flows ``module`` is made of: its fields that are flows or tuples of flows."""
+    for value in vars(module).values():
+        for item in value if isinstance(value, tuple | list) else (value,):
+            if isinstance(item, AbstractFlow):
+                yield item
+
+
+def _leaf_flows(flow):
+    subs = tuple(sub_flows(flow))
+    if not subs:
+        yield flow
+    for sub in subs:
+        yield from _leaf_flows(sub)
+
+
+def _unique(flows):
+    """One flow of each kind: a type and the parts it declares accept the same states
+    (a composition's three rotations of (m, Q) check Q once)."""
+    seen = {}
+    for flow in flows:
+        seen.setdefault((type(flow), getattr(flow, "parts", None)), flow)
+    return seen.values()
+
+
+def check_state(step, x):
+    """``step.check_state(x)`` for a flow (a plain function declares nothing)."""
+    return step.check_state(x) if isinstance(step, AbstractFlow) else x
 
 
 def sum_to_shape(a, shape):

@@ -69,6 +69,11 @@ class MomentumSpin(AbstractFlow):
     rate: jax.Array = eqx.field(converter=jnp.asarray)
     parts: tuple | None = eqx.field(static=True, default=None, converter=check_parts)
 
+    def check_state(self, x):
+        from ._validate import check_parts as check_values  # _validate builds on so3, as this module does
+
+        return check_values(x, self.parts)
+
     def __call__(self, state, t):
         m = momentum(state, self.parts)
         if self.parts is None:  # on so(3)* alone the flow is the identity

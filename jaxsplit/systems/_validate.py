@@ -31,6 +31,15 @@ def check_non_negative(value, name: str):
     return arr
 
 
+def check_batches(**batches):
+    """The parameters' batch shapes (name -> shape) broadcast together (static: checked under jit)."""
+    try:
+        return np.broadcast_shapes(*batches.values())
+    except ValueError:
+        shown = ", ".join(f"{name} {tuple(shape)}" for name, shape in batches.items())
+        raise InputError(f"the parameters' batch shapes do not broadcast together: {shown}") from None
+
+
 def _show(values) -> str:
     """A short one-line rendering of concrete values (a batch by its count and worst entry)."""
     values = np.asarray(values)
@@ -54,3 +63,39 @@ def check_unit(values, what: str, name: str, dtype):
     off = np.abs(values - 1) > tol
     if np.any(off):
         raise InputError(f"{what} ({name} = 1 to {tol:.1e}), got {name} = {_show(values[off])}")
+
+
+def _values(leaf):
+    """A concrete floating leaf as a NumPy array (None when traced or not floating)."""
+    if not is_concrete(leaf) or not np.issubdtype(np.result_type(leaf), np.floating):
+        return None
+    return np.asarray(leaf)
+
+
+def check_attitude(a, quaternion: bool):
+    """A concrete attitude: Q ∈ SO(3) (QᵀQ = 1 and det Q = 1) or a unit quaternion q, to √ε of
+    its dtype (Q QᵀQ and |q| are Casimirs: a state from a long run passes). A rotation flow
+    keeps whatever it is given, so anything else would integrate to a meaningless attitude."""
+    a = _values(a)
+    if a is None:
+        return
+    if quaternion:
+        check_unit(np.linalg.norm(a, axis=-1), "q must be a unit quaternion", "|q|", a.dtype)
+        return
+    check_finite_state(a, "the attitude Q")
+    gram = np.swapaxes(a, -1, -2) @ a
+    check_unit(1 + np.max(np.abs(gram - np.eye(3)), axis=(-1, -2)), "Q must be orthogonal", "1 + max|QᵀQ − 1|",
+               a.dtype)
+    check_unit(np.linalg.det(a), "Q must be a rotation, not a reflection", "det Q", a.dtype)
+
+
+def check_parts(state, parts):
+    """The concrete values of the parts a rotation flow declares (``so3``): an ``"attitude"``
+    part must be a rotation matrix, a ``"quaternion"`` part a unit quaternion; momenta and
+    body vectors may be any finite vector."""
+    if parts is None or not isinstance(state, tuple) or len(state) != len(parts):
+        return state  # the flow's own shape check names a wrong layout
+    for part, leaf in zip(parts, state):
+        if part in ("attitude", "quaternion"):
+            check_attitude(leaf, part == "quaternion")
+    return state

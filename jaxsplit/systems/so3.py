@@ -458,6 +458,12 @@ class AbstractRotation(AbstractFlow):
         _check_batch(jnp.shape(self.rate), m.shape[1:] if self.components_first else m.shape[:-1])
         return m
 
+    def check_state(self, x):
+        """The declared parts' values (``_validate.check_parts``): an attitude must be a rotation."""
+        from ._validate import check_parts as check_values  # _validate builds on this module
+
+        return check_values(x, self.parts)
+
     def for_run(self, x0, t, step):
         """This rotation with the fastest kernel for one run of ``step`` from ``x0`` with
         sub-steps |s| <= ``t`` (concrete values): ``"polynomial"`` where every flow of ``step``
