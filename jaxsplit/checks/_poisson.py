@@ -46,6 +46,7 @@ def _vector(x):
 
 
 def _map(step, x, h):
+    h = step_size(h)  # a finite real scalar (where concrete), as integrate's
     return lambda y: step(y, h)
 
 

@@ -89,7 +89,7 @@ def check_moments(values, name: str = "inertia", allow_nonphysical: bool | None 
                        f"pass {flag} to integrate it anyway")
             if allow_nonphysical is None:
                 warnings.warn(message + " (refused from a later version on; allow_nonphysical=False refuses it now)",
-                              FutureWarning, stacklevel=5)
+                              FutureWarning, stacklevel=6)  # the caller of the constructor
                 return values
             raise InputError(message)
     return values

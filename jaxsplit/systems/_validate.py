@@ -67,7 +67,7 @@ def check_unit(values, what: str, name: str, dtype):
 
 def _values(leaf):
     """A concrete floating leaf as a NumPy array (None when traced or not floating)."""
-    if not is_concrete(leaf) or not np.issubdtype(np.result_type(leaf), np.floating):
+    if not is_concrete(leaf) or not np.issubdtype(leaf.dtype if hasattr(leaf, "dtype") else np.result_type(leaf), np.floating):
         return None
     return np.asarray(leaf)
 
