@@ -61,7 +61,7 @@ def available_memory(device=None) -> int:
             stats = device.memory_stats() or {}
             if "bytes_limit" in stats:
                 return int(stats["bytes_limit"]) - int(stats.get("bytes_in_use", 0))
-        except Exception:  # noqa: BLE001 - a backend without statistics: fall back to the host's
+        except Exception:  # noqa: BLE001, S110 - a backend without statistics: the host's memory below
             pass
     try:
         with open("/proc/meminfo") as f:

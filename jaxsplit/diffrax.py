@@ -137,7 +137,7 @@ def term(system, split: str | None = None, **options) -> SplittingTerm:
 def _splitting_term(terms) -> SplittingTerm:
     """The ``SplittingTerm`` inside whatever wrapper diffrax put around it."""
     kinds = (SplittingTerm, diffrax.ODETerm, diffrax.ControlTerm)  # public terms that hold no other term
-    is_term = lambda x: isinstance(x, kinds)  # noqa: E731
+    is_term = lambda x: isinstance(x, kinds)
     leaves = jax.tree_util.tree_leaves(terms, is_leaf=is_term)
     found = [leaf for leaf in leaves if isinstance(leaf, SplittingTerm)]
     if len(found) != 1:

@@ -56,8 +56,8 @@ def test_every_batched_parameter_with_one_state_is_refused_in_every_split(name):
         if split == "symmetric" and system.inertia.ndim > 1:
             continue  # the symmetric split refuses the asymmetric body of the batch first
         options = {"shift": 1} if split in ("casimir", "spin") else {}
-        _refused(lambda: integrate(splitting(system, "strang", split, **options), x0, 0.1, 2).final,
-                 "batch shape (2,)", "state's batch shape is ()")
+        step = splitting(system, "strang", split, **options)
+        _refused(lambda step=step: integrate(step, x0, 0.1, 2).final, "batch shape (2,)", "state's batch shape is ()")
 
 
 def test_a_batched_parameter_is_refused_under_jit_too_and_one_state_per_value_runs():
@@ -185,8 +185,8 @@ def test_integrate_refuses_a_bad_initial_time_for_both_kinds_of_run(t0, words):
 
 def test_integrate_refuses_a_zero_step_and_complex_output_times():
     for h in (0, 0.0, -0.0, jnp.array(0.0)):
-        _refused(lambda: integrate(STEP, M0, h, 2).final, "h must be a non-zero step size")
-        _refused(lambda: integrate(STEP, M0, h, ts=[0.5]).final, "h must be a non-zero step size")
+        _refused(lambda h=h: integrate(STEP, M0, h, 2).final, "h must be a non-zero step size")
+        _refused(lambda h=h: integrate(STEP, M0, h, ts=[0.5]).final, "h must be a non-zero step size")
     _refused(lambda: integrate(STEP, M0, 0.1, ts=jnp.array([0.5 + 1j, 1.0])).final, "ts must be real times",
              "complex128")
     _refused(lambda: integrate(STEP, M0, 0.1, ts=np.array(["a"])).final, "ts must be real output times")
@@ -200,7 +200,7 @@ def test_integrate_refuses_a_zero_step_and_complex_output_times():
 ], ids=["poisson_defect", "symplectic_defect", "orbit_symplectic_defect", "poisson_summary"])
 def test_every_structure_check_refuses_a_non_finite_step(check):
     for h in (math.nan, math.inf):
-        _refused(lambda: check(h), "finite")
+        _refused(lambda h=h: check(h), "finite")
 
 
 # ---------------------------------------------------------------- counts and sizes: one bound-checker
@@ -301,6 +301,6 @@ def test_the_diffrax_solver_refuses_what_integrate_refuses():
     term, solver = jd.term(body), jd.Splitting("strang")
     _refused(lambda: diffrax.diffeqsolve(term, solver, 0.0, 1.0, 0.5, M0.astype(complex)), "y0 must be real")
     for terms in (diffrax.ODETerm(lambda t, y, args: body.vector_field(y)), diffrax.MultiTerm(term, term)):
-        _refused(lambda: diffrax.diffeqsolve(terms, solver, 0.0, 1.0, 0.5, M0), "jd.term(system, split)")
+        _refused(lambda terms=terms: diffrax.diffeqsolve(terms, solver, 0.0, 1.0, 0.5, M0), "jd.term(system, split)")
     sol = diffrax.diffeqsolve(term, solver, 0.0, 1.0, math.nan, M0, throw=False)
     assert sol.result == diffrax.RESULTS.nonfinite  # not successful with NaN (throw=True raises it)

@@ -341,5 +341,5 @@ def integrate_checkpointed(step, x0, h, n_steps: int, *, block: int | None = Non
     if block is not None:
         block = check_count(block, "block", 1)
     x0 = as_state(x0)
-    h = jnp.asarray(step_size(h), dtype=float_dtype(x0))
+    h = jnp.asarray(step_size(h, nonzero=True), dtype=float_dtype(x0))
     return advance_checkpointed(step, x0, h, n_steps, block)
