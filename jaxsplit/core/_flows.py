@@ -17,6 +17,7 @@ import jax
 import jax.numpy as jnp
 
 from ._errors import InputError
+from ._memo import derived
 from ._state import fits_batch
 
 
@@ -112,9 +113,8 @@ class AbstractFlow(eqx.Module):
         still looks fine (an attitude that is no rotation); traced values pass. ``integrate``
         calls it on the initial state. Default: the checks of the flows this one is made of
         (a composition's pieces), each kind once."""
-        for flow in _unique(_leaf_flows(self)):
-            if flow is not self:
-                flow.check_state(x)
+        for check, flow in _state_checks(self):
+            check(flow, x)
         return x
 
     def step_back(self, x_after, t, ct_after):
@@ -151,18 +151,29 @@ def _leaf_flows(flow):
         yield from _leaf_flows(sub)
 
 
-def _unique(flows):
-    """One flow of each kind: a type and the parts it declares accept the same states
-    (a composition's three rotations of (m, Q) check Q once)."""
-    seen = {}
-    for flow in flows:
-        seen.setdefault((type(flow), getattr(flow, "parts", None)), flow)
-    return seen.values()
+def _state_checks(step) -> tuple:
+    """((unbound check_state, flow), ...) of the flows ``step`` is made of that declare one, one
+    per kind (a type and the parts it declares accept the same states: a composition's three
+    rotations of (m, Q) check Q once). Remembered per step: walking an equinox module's fields
+    and looking up its methods (a bound method of a module is a module built per lookup) cost
+    more than a small run."""
+    def collect():
+        kinds = {}
+        for flow in _leaf_flows(step):
+            check = type(flow).check_state
+            if flow is not step and check is not AbstractFlow.check_state:
+                kinds.setdefault((type(flow), getattr(flow, "parts", None)), (check, flow))
+        return tuple(kinds.values())
+
+    return derived(step, "state checks", collect)
 
 
 def check_state(step, x):
-    """``step.check_state(x)`` for a flow (a plain function declares nothing)."""
-    return step.check_state(x) if isinstance(step, AbstractFlow) else x
+    """``x`` refused where ``step`` (a flow) declares it cannot integrate it (``check_state``);
+    a plain function declares nothing. Called through the class: cheap for a remembered step."""
+    if isinstance(step, AbstractFlow):
+        type(step).check_state(step, x)
+    return x
 
 
 def sum_to_shape(a, shape):

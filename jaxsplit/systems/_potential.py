@@ -52,7 +52,8 @@ class PotentialKick(AbstractKick):
     def check_state(self, x):
         """The states of the system the potential belongs to (a bound method's owner)."""
         owner = getattr(self.potential, "__self__", None)
-        return owner.check_state(x) if isinstance(owner, AbstractSystem) else x
+        # through the class: a bound method of an equinox module is a module built per lookup
+        return type(owner).check_state(owner, x) if isinstance(owner, AbstractSystem) else x
 
     def velocity(self, state):
         """(the torque Γ × ∇V(Γ), None: Γ does not move)."""
@@ -96,10 +97,11 @@ class BodyInPotential(AbstractSystem):
         """``x`` as a state of this system, checked where concrete: a tuple (m, Γ) of finite
         (..., 3) arrays with Γ a unit vector (to √ε of its dtype; |Γ| is a Casimir, so a state
         from a long run passes). Returns ``x``."""
-        _, gamma = self._parts(x)
-        check_finite_state(x, f"the state of {self.name}")
+        _, gamma = BodyInPotential._parts(self, x)
+        check_finite_state(x, f"the state of {type(self).__name__}")
         if is_concrete(gamma):
-            check_unit(np.linalg.norm(np.asarray(gamma), axis=-1), "Γ must be a unit vector", "|Γ|", gamma.dtype)
+            g = np.asarray(gamma)
+            check_unit(np.sqrt(np.einsum("...i,...i->...", g, g)), "Γ must be a unit vector", "|Γ|", g.dtype)
         return x
 
     def kinetic_energy(self, x):

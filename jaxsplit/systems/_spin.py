@@ -70,7 +70,9 @@ class MomentumSpin(AbstractFlow):
     parts: tuple | None = eqx.field(static=True, default=None, converter=check_parts)
 
     def check_state(self, x):
-        from ._validate import check_parts as check_values  # _validate builds on so3, as this module does
+        if self.parts is None or "attitude" not in self.parts and "quaternion" not in self.parts:
+            return x  # momenta and body vectors: any vector
+        from ._validate import check_parts as check_values  # _validate builds on so3
 
         return check_values(x, self.parts)
 
