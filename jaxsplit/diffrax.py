@@ -44,8 +44,8 @@ What diffrax features do with it:
   the bounded long-time energy error of fixed steps is lost.
 * Adjoints: the default ``RecursiveCheckpointAdjoint`` and ``DirectAdjoint`` differentiate
   through the steps (gradients agree with ``jaxsplit.integrate``'s). ``BacksolveAdjoint``
-  solves the continuous adjoint ODE with the same solver, whose term is not a split system:
-  the forward solve runs, and diffrax refuses its gradient (term/solver incompatible).
+  solves the continuous adjoint ODE with the same solver, whose state is not the system's:
+  the forward solve runs, and its gradient is refused (``InputError`` naming the adjoint).
 * ``jax.vmap``, ``jax.jit``, progress meters, ``SaveAt(t0=, t1=, ts=, steps=, dense=)`` and
   a negative time direction work as for any diffrax solver; events are located on the dense
   output, so the event state is a partial step too (on the Casimir's level set).
@@ -148,9 +148,16 @@ def _splitting_term(terms) -> SplittingTerm:
     return found[0]
 
 
-def _check_start(t0, t1, y0):
-    """A real state (integrate refuses complex ones too) and finite concrete times."""
+def _check_start(term, t0, t1, y0):
+    """A real state of the term's system (integrate refuses complex ones too) and finite
+    concrete times."""
     as_state(y0, "y0")
+    try:
+        jax.eval_shape(term.system.vector_field, y0)
+    except (InputError, TypeError, ValueError) as err:
+        raise InputError(f"y0 is not a state of {type(term.system).__name__} ({str(err).splitlines()[0]}); "
+                         "diffrax's BacksolveAdjoint hands the solver its adjoint ODE's state, which a splitting "
+                         "cannot integrate: use the default adjoint") from None
     for name, t in (("t0", t0), ("t1", t1)):
         if not isinstance(t, jax.core.Tracer) and not bool(jnp.all(jnp.isfinite(jnp.asarray(t)))):
             raise InputError(f"{name} must be finite, got {t}")
@@ -211,8 +218,9 @@ class _AbstractSplitting(diffrax.AbstractSolver):
             raise InputError(f"jaxsplit.diffrax.{type(self).__name__} takes its parameters from the system: pass "
                              "args=None and build the term (jd.term(system, ...)) inside the function you vmap or "
                              "differentiate")
-        self.composition(_splitting_term(terms).flows)  # a scheme the split cannot take fails here
-        _check_start(t0, t1, y0)
+        term = _splitting_term(terms)
+        self.composition(term.flows)  # a scheme the split cannot take fails here
+        _check_start(term, t0, t1, y0)
         # stateless: diffrax keeps the implicit None as the solver state
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
