@@ -9,6 +9,7 @@ flow too (not a group), so compositions nest.
 """
 
 import abc
+import weakref
 from collections.abc import Callable
 from typing import Any
 
@@ -17,7 +18,6 @@ import jax
 import jax.numpy as jnp
 
 from ._errors import InputError
-from ._memo import derived
 from ._state import fits_batch
 
 
@@ -157,15 +157,21 @@ def _state_checks(step) -> tuple:
     rotations of (m, Q) check Q once). Remembered per step: walking an equinox module's fields
     and looking up its methods (a bound method of a module is a module built per lookup) cost
     more than a small run."""
-    def collect():
-        kinds = {}
-        for flow in _leaf_flows(step):
-            check = type(flow).check_state
-            if flow is not step and check is not AbstractFlow.check_state:
-                kinds.setdefault((type(flow), getattr(flow, "parts", None)), (check, flow))
-        return tuple(kinds.values())
+    entry = _CHECKS.get(id(step))
+    if entry is not None and entry[0]() is step:
+        return entry[1]
+    kinds = {}
+    for flow in _leaf_flows(step):
+        check = type(flow).check_state
+        if flow is not step and check is not AbstractFlow.check_state:
+            kinds.setdefault((type(flow), getattr(flow, "parts", None)), (check, flow))
+    checks = tuple(kinds.values())
+    ident = id(step)
+    _CHECKS[ident] = (weakref.ref(step, lambda _: _CHECKS.pop(ident, None)), checks)
+    return checks
 
-    return derived(step, "state checks", collect)
+
+_CHECKS: dict = {}  # id(step) -> (weak reference, its checks): forgotten with the step
 
 
 def check_state(step, x):
