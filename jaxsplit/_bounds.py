@@ -107,6 +107,12 @@ def memory(need: int, limit: int, what: str, hint: str, limit_name: str = "half 
     return need
 
 
+def fits(need: int, what: str, hint: str, device=None) -> int:
+    """The library's memory bound: ``need`` bytes (the estimate counts the work's own copies and
+    temporaries) must fit in the memory available now where the arrays will live."""
+    return memory(need, available_memory(device), what, hint, "the memory available now")
+
+
 def saved_states(n_steps: int, save_every: int, bytes_per_saved: int, limit: int, extra: int = 0, *,
                  every: str = "save_every", at: str = "ts", limit_name: str = "half the memory available now") -> int:
     """Bytes of a run saving every ``save_every``-th state (and the first and last ones) and

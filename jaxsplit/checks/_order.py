@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._bounds import count, memory, memory_limit
+from .._bounds import count, fits
 from .._xla_cpu import jit
 from ..core._compose import Composition
 from ..core._errors import InputError
@@ -122,7 +122,7 @@ def ladder(start: int, factor: float = 16.0, points: int = 12):
     start, points = count(start, "start"), count(points, "points", 2)
     if isinstance(factor, bool) or not isinstance(factor, (int, float)) or not (math.isfinite(factor) and factor > 1):
         raise InputError(f"factor must be a finite number > 1, got {factor!r}")
-    memory(points * 64, memory_limit(None), f"a ladder of {points:,} step counts", "give fewer points")
+    fits(points * 64, f"a ladder of {points:,} step counts", "give fewer points")
     return sorted({round(start * factor ** (k / (points - 1))) for k in range(points)})
 
 

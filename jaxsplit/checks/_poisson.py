@@ -27,7 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._bounds import count, memory, memory_limit
+from .._bounds import count, fits
 from ..core._errors import InputError
 from ..core._integrate import step_size
 from ..core._state import as_state, float_dtype, leading_size, ravel
@@ -309,7 +309,7 @@ def random_unit_states(key, n_samples: int, dim: int = 3, dtype=None):
     """States uniform on the unit sphere of Rⁿ (a sample for the checks)."""
     n_samples, dim = count(n_samples, "n_samples"), count(dim, "dim")
     dtype = dtype or jnp.result_type(float)
-    memory(2 * n_samples * dim * np.dtype(dtype).itemsize, memory_limit(None, jax.devices()[0]),
-           f"{n_samples:,} random states of dimension {dim:,}", "draw fewer states")
+    fits(2 * n_samples * dim * np.dtype(dtype).itemsize, f"{n_samples:,} random states of dimension {dim:,}",
+         "draw fewer states", jax.devices()[0])
     x = jax.random.normal(key, (n_samples, dim), dtype=dtype)
     return x / jnp.linalg.norm(x, axis=1, keepdims=True)

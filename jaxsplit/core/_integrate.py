@@ -213,17 +213,17 @@ _SMALL_OUTPUT = 2**26
 
 
 def _output_memory(n_saved: int, x0, hint: str):
-    """Refuse a run whose saved states would not fit: their bytes (with a copy for the stacked
-    result) against half the memory available where x0 lives (an estimate under ``vmap``:
-    without the batch axes)."""
+    """Refuse a run whose saved states would not fit: their bytes, twice (the loop's output and
+    the stacked result), against the memory available where x0 lives (under ``vmap`` an
+    estimate without the batch axes)."""
     need = n_saved * _bounds.array_bytes(x0)
     if need <= _SMALL_OUTPUT:
         return
     leaf = next((a for a in jax.tree_util.tree_leaves(x0) if isinstance(a, jax.Array)
                  and not isinstance(a, jax.core.Tracer)), None)
     device = next(iter(leaf.devices())) if leaf is not None else jax.devices()[0]
-    _bounds.memory(2 * need, _bounds.memory_limit(None, device), f"the saved states ({n_saved:,} of "
-                   f"{_bounds.format_bytes(need / n_saved)})", hint)
+    _bounds.fits(2 * need, f"the saved states ({n_saved:,} of {_bounds.format_bytes(need / n_saved)}, and a copy)",
+                 hint, device)
 
 
 def _output_times(ts, t0, h):

@@ -51,7 +51,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._bounds import count, memory, memory_limit
+from .._bounds import available_memory, count, fits
 from ..checks._poisson import poisson_defect
 from ..core._compose import roll
 from ..core._errors import InputError
@@ -128,10 +128,9 @@ BYTES_PER_CASE = 256
 
 
 def _case_memory(n: int, what: str):
-    """Refuse a set of cases that would not fit in half the host's available memory."""
-    limit = memory_limit(None)
-    memory(n * BYTES_PER_CASE, limit, f"sweep_cases: {n:,} cases ({what})",
-           f"at most {max(1, limit // BYTES_PER_CASE):,} cases fit: sweep them in parts")
+    """Refuse a set of cases that would not fit in the host's available memory."""
+    fits(n * BYTES_PER_CASE, f"sweep_cases: {n:,} cases ({what})",
+         f"at most {max(1, available_memory() // BYTES_PER_CASE):,} cases fit: sweep them in parts")
 
 
 def physical(ratios) -> np.ndarray:
@@ -158,8 +157,8 @@ def sweep_cases(*, states=8, ratios=((1.0, 0.5),), step_sizes=(0.1,), sampling: 
     log-uniform in ``ratio_range`` (rejecting non-physical bodies when ``physical_only``)
     and h log-uniform in ``h_range``; reproducible from ``seed``. Arrays in ``dtype``
     (default float): ``m0``, ``inertia`` (N, 3), ``h`` (N,), indices int (N,). The number of
-    cases is refused before anything is built when they would not fit in half the available
-    memory (``BYTES_PER_CASE`` each).
+    cases is refused before anything is built when they would not fit in the available memory
+    (``BYTES_PER_CASE`` each).
 
     >>> import jaxsplit
     >>> cases = jaxsplit.sweep_cases(states=4, ratios=[(1.0, 0.5), (0.8, 0.6)], step_sizes=[0.1, 0.05])

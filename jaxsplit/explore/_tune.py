@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from .._bounds import MAX_STAGES, WHY_STAGES, at_most, count, memory, memory_limit
+from .._bounds import MAX_STAGES, WHY_STAGES, at_most, count, fits
 from ..core._errors import InputError
 from ..core._schemes import Scheme
 from ..core._state import as_state, leading_size
@@ -124,7 +124,7 @@ def tune_scheme(params, states, *, system=None, stages: int = 5, t_end: float = 
     at_most(stages, MAX_STAGES, "stages", WHY_STAGES)
     iterations = count(iterations, "iterations", 0, 2**31 - 1, "a lax.scan length, counted in int32")
     scan_points = count(scan_points, "scan_points", 0, 2**31 - 1, "the objective is evaluated at every point")
-    memory(scan_points * 64, memory_limit(None), f"a scan of {scan_points:,} points", "give fewer scan_points")
+    fits(scan_points * 64, f"a scan of {scan_points:,} points", "give fewer scan_points")
     family = family_of(system)
     if any(isinstance(v, str) and v == "auto" for v in split_options.values()):
         raise InputError("tune_scheme runs every training system in one traced batch: give explicit split "
