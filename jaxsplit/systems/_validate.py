@@ -8,6 +8,7 @@ import numpy as np
 
 from ..core._errors import InputError
 from ._rigid_body import as_float_array, is_concrete
+from .so3 import check_shape
 
 
 def check_vector(value, name: str):
@@ -105,5 +106,6 @@ def check_parts(state, parts):
         return state  # the flow's own shape check names a wrong layout
     for part, leaf in zip(parts, state):
         if part in ("attitude", "quaternion"):
+            check_shape(leaf, part)  # the shape first: its message names the layout
             check_attitude(leaf, part == "quaternion")
     return state
