@@ -193,6 +193,10 @@ def step_size(h, nonzero: bool = False):
 
 def initial_time(t0):
     """``t0`` checked: a real scalar, finite when concrete (a NaN start makes every time NaN)."""
+    if type(t0) in (float, int):  # the common case, without NumPy
+        if not math.isfinite(t0):
+            raise InputError(f"t0 must be a finite time, got {t0}")
+        return t0
     if t0 is None or isinstance(t0, (str, bytes, bool, np.bool_)):
         raise InputError(f"t0 must be a real number, got {t0!r}")
     if isinstance(t0, jax.core.Tracer):
