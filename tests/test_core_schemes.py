@@ -73,7 +73,8 @@ def test_valid_user_scheme_can_be_registered_and_used():
 def test_unknown_name_suggests_the_nearest():
     with pytest.raises(InputError, match="did you mean strang"):
         jaxsplit.schemes["strnag"]
-    assert "triple-jump-20" in jaxsplit.schemes and "triple-jump-5" not in jaxsplit.schemes
+    assert "triple-jump-14" in jaxsplit.schemes and "triple-jump-5" not in jaxsplit.schemes
+    assert "triple-jump-16" not in jaxsplit.schemes  # 3^7 stages: over the bound (tests/test_validation.py)
 
 
 def test_partitioned_scheme_refuses_three_pieces():

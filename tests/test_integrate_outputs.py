@@ -94,9 +94,10 @@ def test_output_times_are_checked():
         jaxsplit.integrate(step, M0, 0.1, 10, ts=[0.5])
     with pytest.raises(InputError, match="needs n_steps"):
         jaxsplit.integrate(step, M0, 0.1)
-    for reach, h in ((2.0**31 * 0.1, 0.1), (1.0, 0.0)):  # the grid index is an int32: no silent wrap-around
-        with pytest.raises(InputError, match="at most 2\\^31 - 1 steps"):
-            jaxsplit.integrate(step, M0, h, ts=[0.5, reach])
+    with pytest.raises(InputError, match="at most 2\\^31 - 1 steps"):  # the grid index is an int32: no wrap-around
+        jaxsplit.integrate(step, M0, 0.1, ts=[0.5, 2.0**31 * 0.1])
+    with pytest.raises(InputError, match="non-zero step size"):  # h = 0: no grid at all
+        jaxsplit.integrate(step, M0, 0.0, ts=[0.5, 1.0])
     back = jaxsplit.integrate(step, M0, -0.1, ts=[-0.25, -1.0])  # backwards: decreasing times
     np.testing.assert_allclose(back.t, [-0.25, -1.0])
 

@@ -11,12 +11,14 @@ asymptotic regime is set by the largest sub-step |w| h, not by the error).
 """
 
 import functools
+import math
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._bounds import count, fits
 from ..core._errors import InputError
 from ..core._flows import join_parameters, split_parameters
 from ..core._integrate import integrate
@@ -114,6 +116,10 @@ def ladder(start: int, factor: float = 16.0, points: int = 12):
     >>> jaxsplit.ladder(10, 8.0, 4)
     [10, 20, 40, 80]
     """
+    start, points = count(start, "start"), count(points, "points", 2)
+    if isinstance(factor, bool) or not isinstance(factor, (int, float)) or not (math.isfinite(factor) and factor > 1):
+        raise InputError(f"factor must be a finite number > 1, got {factor!r}")
+    fits(points * 64, f"a ladder of {points:,} step counts", "give fewer points")
     return sorted({round(start * factor ** (k / (points - 1))) for k in range(points)})
 
 

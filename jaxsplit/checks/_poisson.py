@@ -27,7 +27,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._bounds import count, fits
 from ..core._errors import InputError
+from ..core._integrate import step_size
 from ..core._state import as_state, float_dtype, leading_size, ravel
 
 
@@ -45,13 +47,14 @@ def _vector(x):
 
 
 def _map(step, x, h):
+    h = step_size(h)  # a finite real scalar (where concrete), as integrate's
     return lambda y: step(y, h)
 
 
 def _flat_map(step, x, h):
     """(flat x, Φ on flat vectors, unravel) for a map of any PyTree state."""
     flat, unravel = ravel(x)
-    h = jnp.asarray(h, dtype=flat.dtype)
+    h = jnp.asarray(step_size(h), dtype=flat.dtype)
     return flat, (lambda v: ravel(step(unravel(v), h))[0]), unravel
 
 
@@ -222,6 +225,8 @@ def _sample(xs, hs):
     hs = jnp.broadcast_to(jnp.asarray(hs, dtype=dtype), (n,)) if jnp.ndim(hs) == 0 else jnp.asarray(hs, dtype)
     if hs.shape != (n,):
         raise InputError(f"need one step size per state ({n}) or a scalar, got shape {hs.shape}")
+    if not isinstance(hs, jax.core.Tracer) and not bool(jnp.all(jnp.isfinite(hs))):
+        raise InputError(f"step sizes must be finite, got {np.asarray(hs)[~np.isfinite(np.asarray(hs))][:3].tolist()}")
     return xs, hs
 
 
@@ -302,5 +307,9 @@ def growth_exponent(hs, defects, floor: float = 1e-13) -> float:
 
 def random_unit_states(key, n_samples: int, dim: int = 3, dtype=None):
     """States uniform on the unit sphere of Rⁿ (a sample for the checks)."""
-    x = jax.random.normal(key, (n_samples, dim), dtype=dtype or jnp.result_type(float))
+    n_samples, dim = count(n_samples, "n_samples"), count(dim, "dim")
+    dtype = dtype or jnp.result_type(float)
+    fits(2 * n_samples * dim * np.dtype(dtype).itemsize, f"{n_samples:,} random states of dimension {dim:,}",
+         "draw fewer states", jax.devices()[0])
+    x = jax.random.normal(key, (n_samples, dim), dtype=dtype)
     return x / jnp.linalg.norm(x, axis=1, keepdims=True)

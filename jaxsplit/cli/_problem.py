@@ -155,17 +155,18 @@ def problem(args) -> Problem:
         system, x0 = rigid, initial_state(m0, inertia)
     elif name == "attitude":
         q0 = unit_vector(value["q0"], "--q0", "a unit quaternion w,x,y,z (the identity is 1,0,0,0)")
-        system = attitude(rigid.inertia)
+        system = attitude(rigid.inertia, allow_nonphysical=True)  # checked by body()
         x0 = (initial_state(m0, inertia), np.asarray(quaternion_to_matrix(jnp.asarray(q0))))
         parameters |= {"q0": list(value["q0"])}
     else:
         gamma0 = unit_vector(value["gamma0"], "--gamma0", "a unit vector (a direction)")
         if name == "heavy-top":
             system = heavy_top(rigid.inertia, jnp.asarray(value["center_of_mass"], dtype=jnp.float64),
-                               jnp.asarray(value["weight"], dtype=jnp.float64))
+                               jnp.asarray(value["weight"], dtype=jnp.float64), allow_nonphysical=True)
             parameters |= {"center_of_mass": list(value["center_of_mass"]), "weight": value["weight"]}
         else:
-            system = gravity_gradient(rigid.inertia, jnp.asarray(value["rate"], dtype=jnp.float64))
+            system = gravity_gradient(rigid.inertia, jnp.asarray(value["rate"], dtype=jnp.float64),
+                                      allow_nonphysical=True)
             parameters |= {"rate": value["rate"]}
         x0 = (initial_state(m0, inertia, kinetic_only=True), gamma0)
         parameters |= {"gamma0": list(value["gamma0"])}
@@ -175,31 +176,14 @@ def problem(args) -> Problem:
 
 
 def body(inertia, allow_nonphysical: bool):
-    """A RigidBody from a parsed --inertia, refusing non-physical bodies unless allowed."""
+    """A RigidBody from a parsed --inertia: the library's check of the moments (positive,
+    1/I representable, physical unless --allow-nonphysical), naming the options."""
     import jax.numpy as jnp
 
-    from ..systems._rigid_body import RigidBody
+    from ..systems._rigid_body import RigidBody, check_moments
 
-    if not all(v > 0 for v in inertia):
-        raise InputError(f"--inertia must be positive (I1,I2,I3 > 0), got {fmt_vec(inertia)}")
-    with np.errstate(over="ignore", divide="ignore"):
-        inverse = 1 / np.asarray(inertia, dtype=np.float64)
-    if not np.all(np.isfinite(inverse)):
-        k = int(np.argmin(np.isfinite(inverse)))
-        raise InputError(f"--inertia {fmt_vec(inertia)}: 1/I{k + 1} overflows float64 (each moment must be at least "
-                         f"{1 / np.finfo(np.float64).max:.2g})")
-    rigid = RigidBody(jnp.asarray(inertia, dtype=jnp.float64))
-    if not allow_nonphysical and not rigid.is_physical():
-        i = inertia
-        for a, b, c, names in ((0, 1, 2, "I1 + I2 >= I3"), (1, 2, 0, "I2 + I3 >= I1"), (2, 0, 1, "I3 + I1 >= I2")):
-            if i[a] + i[b] < i[c]:
-                failed = f"{names} fails ({i[a]:g} + {i[b]:g} < {i[c]:g})"
-                break
-        raise InputError(
-            f"--inertia {fmt_vec(inertia)} is not a physical body: triangle inequality {failed}; "
-            "pass --allow-nonphysical to integrate it anyway"
-        )
-    return rigid
+    check_moments(np.asarray(inertia, dtype=np.float64), "--inertia", allow_nonphysical, "--allow-nonphysical")
+    return RigidBody(jnp.asarray(inertia, dtype=jnp.float64), allow_nonphysical=True)  # checked above
 
 
 def initial_state(m0, inertia, kinetic_only: bool = False) -> np.ndarray:

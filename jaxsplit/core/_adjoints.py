@@ -38,6 +38,32 @@ from ._loops import plain_loops
 ADJOINTS = ("store", "checkpoint", "reversible")
 
 
+# Reverse mode (grad, vjp) traces its inputs with JAX's linearizing tracer (JAX linearizes
+# directly since 0.5), forward mode (jvp, jacfwd) with JVPTracer: what lets ``choose_adjoint``
+# pick for a ts= run. The class is not exported, so it is recognised by name; were it renamed,
+# nothing would be chosen and JAX's own error would remain (tests/test_validation.py fails then).
+def reverse_mode(tree) -> bool:
+    """Whether a leaf of ``tree`` is being linearized for reverse mode (grad, vjp)."""
+    return any(type(leaf).__name__ == "LinearizeTracer" for leaf in jax.tree_util.tree_leaves(tree))
+
+
+def choose_adjoint(adjoint, step, ts_run: bool, inputs) -> str:
+    """``adjoint`` checked, or the one that works: ``"store"``, except for a ``ts=`` run under
+    reverse mode, whose loops of traced length only the reversible adjoint differentiates
+    (``"reversible"`` for a splitting of reversible flows; for another step an ``InputError``)."""
+    if adjoint is not None:
+        return check_adjoint(adjoint, step)
+    if ts_run and reverse_mode(inputs):
+        try:
+            return check_adjoint("reversible", step)
+        except InputError:
+            raise InputError(f"reverse-mode differentiation (grad, vjp) of integrate(..., ts=...) needs "
+                             f"adjoint='reversible', a splitting of reversible flows, and a {type(step).__name__} "
+                             "is not one: differentiate a run of n_steps instead, or use forward mode (jvp, "
+                             "jacfwd)") from None
+    return "store"
+
+
 def check_adjoint(adjoint: str, step) -> str:
     if adjoint not in ADJOINTS:
         raise InputError(f"adjoint must be one of {ADJOINTS}, got {adjoint!r}")

@@ -9,6 +9,7 @@ flow too (not a group), so compositions nest.
 """
 
 import abc
+import weakref
 from collections.abc import Callable
 from typing import Any
 
@@ -93,6 +94,15 @@ class AbstractFlow(eqx.Module):
         what the reversible adjoint needs to rebuild states by stepping back."""
         return self.is_group
 
+    def check_state(self, x):
+        """Refuse (``InputError``) a concrete state this flow would integrate to garbage that
+        still looks fine (an attitude that is no rotation); traced values pass. ``integrate``
+        calls it on the initial state. Default: the checks of the flows this one is made of
+        (a composition's pieces), each kind once."""
+        for check, flow in _state_checks(self):
+            check(flow, x)
+        return x
+
     def step_back(self, x_after, t, ct_after):
         """One call of the reversible adjoint's backward pass: the state before this flow,
         x = φ_{−t}(x_after), and the cotangent ``ct_after`` pulled back through φ_t at x:
@@ -109,6 +119,53 @@ class AbstractFlow(eqx.Module):
         _, pullback = jax.vjp(lambda p, y, s: join_parameters(p, static)(y, s), parameters, x, t)
         ct_parameters, ct_x, ct_t = pullback(ct_after)
         return x, ct_x, ct_parameters, ct_t
+
+
+def sub_flows(module):
+    """The flows ``module`` is made of: its fields that are flows or tuples of flows."""
+    for value in vars(module).values():
+        for item in value if isinstance(value, tuple | list) else (value,):
+            if isinstance(item, AbstractFlow):
+                yield item
+
+
+def _leaf_flows(flow):
+    subs = tuple(sub_flows(flow))
+    if not subs:
+        yield flow
+    for sub in subs:
+        yield from _leaf_flows(sub)
+
+
+def _state_checks(step) -> tuple:
+    """((unbound check_state, flow), ...) of the flows ``step`` is made of that declare one, one
+    per kind (a type and the parts it declares accept the same states: a composition's three
+    rotations of (m, Q) check Q once). Remembered per step: walking an equinox module's fields
+    and looking up its methods (a bound method of a module is a module built per lookup) cost
+    more than a small run."""
+    entry = _CHECKS.get(id(step))
+    if entry is not None and entry[0]() is step:
+        return entry[1]
+    kinds = {}
+    for flow in _leaf_flows(step):
+        check = type(flow).check_state
+        if flow is not step and check is not AbstractFlow.check_state:
+            kinds.setdefault((type(flow), getattr(flow, "parts", None)), (check, flow))
+    checks = tuple(kinds.values())
+    ident = id(step)
+    _CHECKS[ident] = (weakref.ref(step, lambda _: _CHECKS.pop(ident, None)), checks)
+    return checks
+
+
+_CHECKS: dict = {}  # id(step) -> (weak reference, its checks): forgotten with the step
+
+
+def check_state(step, x):
+    """``x`` refused where ``step`` (a flow) declares it cannot integrate it (``check_state``);
+    a plain function declares nothing. Called through the class: cheap for a remembered step."""
+    if isinstance(step, AbstractFlow):
+        type(step).check_state(step, x)
+    return x
 
 
 def sum_to_shape(a, shape):

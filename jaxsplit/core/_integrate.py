@@ -30,9 +30,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._adjoints import advance, advance_checkpointed, check_adjoint
+from .. import _bounds
+from ._adjoints import advance, advance_checkpointed, choose_adjoint
 from ._errors import InputError
-from ._flows import join_parameters, split_parameters
+from ._flows import check_state, join_parameters, split_parameters
 from ._state import as_state, float_dtype
 
 
@@ -84,10 +85,7 @@ MAX_COUNT = 2**53  # counts become the float times k*h: exact up to 2^53 (and be
 
 
 def check_count(value, name: str, minimum: int) -> int:
-    if (isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer))
-            or not minimum <= value <= MAX_COUNT):
-        raise InputError(f"{name} must be an integer in [{minimum}, 2^53], got {value!r}")
-    return int(value)
+    return _bounds.count(value, name, minimum)
 
 
 _TRACES = [0]
@@ -162,28 +160,70 @@ def _scheme_name(step):
     return getattr(scheme, "name", None)
 
 
-def step_size(h):
-    """``h`` checked: a real scalar, finite when concrete (cast to the state's dtype later)."""
+def step_size(h, nonzero: bool = False):
+    """``h`` checked: a real scalar, finite (and non-zero when ``nonzero``: a run of steps of
+    length 0 goes nowhere) when concrete (cast to the state's dtype later)."""
     if isinstance(h, (int, float)) and not isinstance(h, bool):
-        if not math.isfinite(h):
-            raise InputError(f"h must be a finite step size, got {h!r}")
-        return h
-    if h is None or isinstance(h, (str, bytes, bool, np.bool_)):
-        raise InputError(f"h must be a real scalar step size, got {h!r}")
-    if isinstance(h, jax.core.Tracer):
         value = h
     else:
-        try:
-            value = np.asarray(h)
-        except (TypeError, ValueError) as err:
-            raise InputError(f"h must be a real scalar step size, got {h!r}") from err
-    if value.ndim or not (jnp.issubdtype(value.dtype, jnp.floating) or jnp.issubdtype(value.dtype, jnp.integer)):
-        raise InputError(f"h must be a real scalar step size, got {h!r}")
-    if not isinstance(h, jax.core.Tracer) and not math.isfinite(float(value)):
-        raise InputError(f"h must be a finite step size, got {float(value)}")
+        if h is None or isinstance(h, (str, bytes, bool, np.bool_)):
+            raise InputError(f"h must be a real scalar step size, got {h!r}")
+        if isinstance(h, jax.core.Tracer):
+            value = h
+        else:
+            try:
+                value = np.asarray(h)
+            except (TypeError, ValueError) as err:
+                raise InputError(f"h must be a real scalar step size, got {h!r}") from err
+        if value.ndim or not (jnp.issubdtype(value.dtype, jnp.floating) or jnp.issubdtype(value.dtype, jnp.integer)):
+            raise InputError(f"h must be a real scalar step size, got {h!r}")
+        if isinstance(h, jax.core.Tracer):
+            return h
+        value = float(value)
+    if not math.isfinite(value):
+        raise InputError(f"h must be a finite step size, got {value!r}")
+    if nonzero and value == 0:
+        raise InputError("h must be a non-zero step size (negative integrates backwards), got 0")
     return h
 
 
+def initial_time(t0):
+    """``t0`` checked: a real scalar, finite when concrete (a NaN start makes every time NaN)."""
+    if type(t0) in (float, int):  # the common case, without NumPy
+        if not math.isfinite(t0):
+            raise InputError(f"t0 must be a finite time, got {t0}")
+        return t0
+    if t0 is None or isinstance(t0, (str, bytes, bool, np.bool_)):
+        raise InputError(f"t0 must be a real number, got {t0!r}")
+    if isinstance(t0, jax.core.Tracer):
+        return t0
+    try:
+        value = np.asarray(t0)
+    except (TypeError, ValueError) as err:
+        raise InputError(f"t0 must be a real number, got {t0!r}") from err
+    if value.ndim or not (np.issubdtype(value.dtype, np.floating) or np.issubdtype(value.dtype, np.integer)):
+        raise InputError(f"t0 must be a real scalar time, got {t0!r}")
+    if not math.isfinite(float(value)):
+        raise InputError(f"t0 must be a finite time, got {float(value)}")
+    return t0
+
+
+# Below this many bytes of saved states no memory check is needed (it reads /proc/meminfo).
+_SMALL_OUTPUT = 2**26
+
+
+def _output_memory(n_saved: int, x0, hint: str):
+    """Refuse a run whose saved states would not fit: their bytes, twice (the loop's output and
+    the stacked result), against the memory available where x0 lives (under ``vmap`` an
+    estimate without the batch axes)."""
+    need = n_saved * _bounds.array_bytes(x0)
+    if need <= _SMALL_OUTPUT:
+        return
+    leaf = next((a for a in jax.tree_util.tree_leaves(x0) if isinstance(a, jax.Array)
+                 and not isinstance(a, jax.core.Tracer)), None)
+    device = next(iter(leaf.devices())) if leaf is not None else jax.devices()[0]
+    _bounds.fits(2 * need, f"the saved states ({n_saved:,} of {_bounds.format_bytes(need / n_saved)}, and a copy)",
+                 hint, device)
 
 
 def _output_times(ts, t0, h):
@@ -191,9 +231,16 @@ def _output_times(ts, t0, h):
     direction of h and not before t0 (traced values pass unchecked)."""
     if any(isinstance(v, jax.core.Tracer) for v in (ts, t0, h)):
         return ts
-    arr = np.asarray(ts)
-    if arr.ndim != 1 or arr.size == 0 or not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
-        raise InputError(f"ts must be a non-empty 1-D array of real output times, got shape {arr.shape}")
+    try:
+        arr = np.asarray(ts)
+    except (TypeError, ValueError) as err:
+        raise InputError(f"ts must be a 1-D array of real output times, got {type(ts).__name__}") from err
+    if np.iscomplexobj(arr):
+        raise InputError(f"ts must be real times, got dtype {arr.dtype} (times are real; h and t0 too)")
+    if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
+        raise InputError(f"ts must be real output times, got dtype {arr.dtype}")
+    if arr.ndim != 1 or arr.size == 0:
+        raise InputError(f"ts must be a non-empty 1-D array of output times, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise InputError("ts must be finite")
     direction = np.sign(float(np.asarray(h))) or 1.0
@@ -210,7 +257,7 @@ def _output_times(ts, t0, h):
 
 
 def integrate(step, x0, h, n_steps: int | None = None, *, save_every: int | None = None, ts=None,
-              t0: float = 0.0, adjoint: str = "store") -> Solution:
+              t0: float = 0.0, adjoint: str | None = None) -> Solution:
     """Advance ``x0`` (any PyTree state) by ``step(x, h)`` with a fixed step ``h``; a ``Solution``.
 
     * ``integrate(step, x0, h, n)``: ``n`` steps; ``.final`` is the state after them (the saved
@@ -224,7 +271,10 @@ def integrate(step, x0, h, n_steps: int | None = None, *, save_every: int | None
     ``jax.jit(jax.vmap(lambda m: integrate(step, m, h, n).final))`` runs the same kernels as
     ``integrate(step, batch, h, n)``.
     A negative ``h`` integrates backwards. ``t0`` is the initial time. ``adjoint`` is
-    ``"store"``, ``"checkpoint"`` or ``"reversible"`` (see ``jaxsplit.core._adjoints``).
+    ``"store"``, ``"checkpoint"`` or ``"reversible"`` (see ``jaxsplit.core._adjoints``); by
+    default ``"store"``, except for a ``ts=`` run under reverse-mode differentiation (``grad``),
+    which takes ``"reversible"`` (``choose_adjoint``: the only adjoint that differentiates
+    its loops of traced length backwards).
     Works under ``jit``, ``vmap`` and ``grad``; the computation follows the dtype of
     ``x0``'s floating leaves (integer leaves are left alone; an all-integer state is
     promoted to the default float).
@@ -241,27 +291,31 @@ def integrate(step, x0, h, n_steps: int | None = None, *, save_every: int | None
     """
     if not callable(step):
         raise InputError(f"step must be callable as step(state, h), got {step!r}")
-    adjoint = check_adjoint(adjoint, step)
     x0 = as_state(x0)
-    h = step_size(h)
-    if isinstance(t0, (str, bytes, bool)) or t0 is None:
-        raise InputError(f"t0 must be a real number, got {t0!r}")
+    h = step_size(h, nonzero=True)
+    t0 = initial_time(t0)
+    check_state(step, x0)  # what the step's flows accept (an attitude must be a rotation)
     parameters, static = split_parameters(step)
     try:
         hash(static)
     except TypeError as err:
         raise InputError(f"step must be a function or a PyTree of arrays and hashable parts: {err}") from err
+    adjoint = choose_adjoint(adjoint, step, ts is not None, (parameters, x0, h, t0, ts))
     if ts is not None:
         if n_steps is not None or save_every is not None:
             raise InputError("give either ts= (output times) or n_steps (with save_every=), not both")
         if adjoint == "checkpoint":
             raise InputError("adjoint='checkpoint' applies to n_steps runs; with ts= use 'store' or 'reversible'")
-        return _run_at(parameters, static, x0, h, t0, _output_times(ts, t0, h), adjoint)
+        ts = _output_times(ts, t0, h)
+        _output_memory(int(np.shape(ts)[0]), x0, "give fewer output times")
+        return _run_at(parameters, static, x0, h, t0, ts, adjoint)
     if n_steps is None:
         raise InputError("integrate needs n_steps (the number of steps) or ts= (output times)")
     n_steps = check_count(n_steps, "n_steps", 0)
     if save_every is not None:
         save_every = check_count(save_every, "save_every", 1)
+        n_saved = n_steps // save_every + 2
+        _output_memory(n_saved, x0, f"save fewer states, e.g. save_every={max(save_every + 1, n_steps // 1000)}")
     return _run(parameters, static, x0, h, t0, n_steps, save_every, adjoint)
 
 
@@ -285,5 +339,5 @@ def integrate_checkpointed(step, x0, h, n_steps: int, *, block: int | None = Non
     if block is not None:
         block = check_count(block, "block", 1)
     x0 = as_state(x0)
-    h = jnp.asarray(step_size(h), dtype=float_dtype(x0))
+    h = jnp.asarray(step_size(h, nonzero=True), dtype=float_dtype(x0))
     return advance_checkpointed(step, x0, h, n_steps, block)

@@ -25,6 +25,7 @@ import math
 import re
 from collections.abc import Iterator, Mapping
 
+from .._bounds import triple_jump_name, triple_jump_order
 from ._errors import InputError
 
 FORMS = ("symmetric", "lie-adjoint", "partitioned")
@@ -130,7 +131,8 @@ class Scheme:
 
 def triple_jump(order: int) -> Scheme:
     """The paper's recursive triple jump of even order ``order`` = 2n+2 (3^n Strang steps);
-    ``schemes["triple-jump-N"]`` resolves to it for any even N >= 2.
+    ``schemes["triple-jump-N"]`` resolves to it for any even N >= 2 up to 14 (3^6 = 729
+    stages): beyond, the stages exceed ``MAX_STAGES`` and are refused before they are built.
 
     >>> import jaxsplit
     >>> s = jaxsplit.triple_jump(4)
@@ -139,6 +141,7 @@ def triple_jump(order: int) -> Scheme:
     """
     if not (isinstance(order, int) and order >= 2 and order % 2 == 0):
         raise InputError(f"triple-jump order must be an even integer >= 2, got {order!r}")
+    triple_jump_order(order, f"triple_jump({order})")
     gammas = (1.0,)
     for p in range(2, order, 2):  # lift order p to p + 2
         x1 = 1.0 / (2.0 - 2.0 ** (1.0 / (p + 1)))
@@ -285,7 +288,7 @@ _TRIPLE_JUMP = re.compile(r"triple-jump-(\d+)")
 class SchemeRegistry(Mapping):
     """The registry of named schemes (``jaxsplit.schemes``): a read-only mapping name -> ``Scheme``.
 
-    ``triple-jump-N`` resolves for any even N >= 2; an unknown name raises an ``InputError``
+    ``triple-jump-N`` resolves for any even N from 2 to 14; an unknown name raises an ``InputError``
     with the closest names. ``register`` adds a scheme; ``resolve`` accepts a name or a
     ``Scheme``.
 
@@ -313,6 +316,7 @@ class SchemeRegistry(Mapping):
                 return self._schemes[name]
             match = _TRIPLE_JUMP.fullmatch(name)
             if match:
+                triple_jump_name(name, f"scheme {name!r}")  # bounded before int() of its digits
                 return triple_jump(int(match.group(1)))
         close = difflib.get_close_matches(str(name), list(self), n=3, cutoff=0.5)
         hint = f"; did you mean {', '.join(close)}?" if close else ""

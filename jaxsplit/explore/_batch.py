@@ -21,16 +21,26 @@ from jax.sharding import PartitionSpec as P
 from ..core._errors import InputError
 from ..core._state import as_state, float_dtype, leading_size, ravel
 from ..systems._base import AbstractSystem
-from ..systems._rigid_body import RigidBody
+from ..systems._rigid_body import RigidBody, flag
 
 STATE_KEYS = ("x0", "m0")
 PARAM_KEYS = ("params", "inertia")
 
 
-def family_of(system):
-    """A callable params -> system (the rigid-body class by default)."""
+def any_body(inertia):
+    """The default family when non-physical bodies are wanted (module-level: a stable key)."""
+    return RigidBody(inertia, allow_nonphysical=True)
+
+
+def physical_body(inertia):
+    return RigidBody(inertia, allow_nonphysical=False)
+
+
+def family_of(system, allow_nonphysical: bool | None = None):
+    """A callable params -> system (the rigid-body class by default, whose concrete bodies
+    ``allow_nonphysical`` admits as ``RigidBody`` does; a family of your own decides itself)."""
     if system is None:
-        return RigidBody
+        return {None: RigidBody, True: any_body, False: physical_body}[flag(allow_nonphysical)]
     if isinstance(system, AbstractSystem):
         raise InputError("pass a family params -> system (e.g. jaxsplit.RigidBody, or a function building "
                          "your system from per-case parameters), not one system instance")

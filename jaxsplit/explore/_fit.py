@@ -22,6 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from .._bounds import count
 from ..core._compose import roll
 from ..core._errors import InputError
 from ..core._schemes import schemes
@@ -31,6 +32,17 @@ from ._batch import family_of, ravel_rows
 
 # ------------------------------------------------------------------ the model
 MAX_SUBSTEPS = 2**31 - 1  # lax.fori_loop counts an interval's model steps in int32
+
+
+MAX_ITERATIONS = 2**31 - 1  # the optimisers count their iterations in int32 (also without x64)
+
+
+def positive(value, name: str, zero: bool = False) -> float:
+    """A finite real number > 0 (>= 0 with ``zero``)."""
+    if (isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating))
+            or not math.isfinite(value) or not (value >= 0 if zero else value > 0)):
+        raise InputError(f"{name} must be a finite number {'>= 0' if zero else '> 0'}, got {value!r}")
+    return float(value)
 
 
 def substeps(t, max_step) -> int:
@@ -240,6 +252,9 @@ def fit(family, t, observed, params0, *, x0=None, fit_x0: bool = True, fixed=Non
     start = time.perf_counter()
     family = family_of(family)
     scheme = schemes.resolve(scheme)
+    adam_steps = count(adam_steps, "adam_steps", 0, MAX_ITERATIONS - 1, "Adam's steps are counted in int32")
+    lbfgs_iter = count(lbfgs_iter, "lbfgs_iter", 0, MAX_ITERATIONS, "L-BFGS counts its iterations in int32")
+    adam_lr, tol = positive(adam_lr, "adam_lr"), positive(tol, "tol", zero=True)
     t, rows = _observations(t, observed)
     n_sub = substeps(t, max_step)
     if x0 is None:
@@ -285,6 +300,9 @@ def simulate(family, params, x0, t, *, fixed=None, observe=None, noise: float = 
     ((9, 3), True)
     """
     t, _ = _observations(t, np.zeros((len(np.atleast_1d(t)), 1)))
+    noise = positive(noise, "noise", zero=True)
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise InputError(f"seed must be an integer >= 0, got {seed!r}")
     x0 = as_state(x0, "x0")
     dtype = float_dtype(x0)
     params = jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), params)

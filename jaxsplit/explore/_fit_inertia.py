@@ -103,7 +103,7 @@ def integral_matching(t, m) -> np.ndarray:
 
 
 def _body(log_inertia):
-    return RigidBody(jnp.exp(log_inertia))
+    return RigidBody(jnp.exp(log_inertia), allow_nonphysical=True)  # a fit may pass through any positive body
 
 
 def _predict(scheme, shift, n_sub: int, log_inertia, m0, dts):

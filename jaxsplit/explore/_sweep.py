@@ -51,10 +51,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._bounds import available_memory, count, fits
 from ..checks._poisson import poisson_defect
 from ..core._compose import roll
 from ..core._errors import InputError
 from ..core._schemes import schemes
+from ..systems._rigid_body import check_moments
 from ..systems._splitting import splitting
 from ._batch import (
     build,
@@ -101,9 +103,7 @@ def _ratios_array(ratios) -> np.ndarray:
 
 def _states_array(states) -> np.ndarray:
     if isinstance(states, (int, np.integer)) and not isinstance(states, bool):
-        if states < 1:
-            raise InputError(f"states must be a count >= 1 or an array (K, 3), got {states}")
-        return fibonacci_sphere(int(states))
+        return fibonacci_sphere(count(states, "states"))
     arr = np.asarray(states, dtype=float)
     if arr.ndim == 1:
         arr = arr[None]
@@ -120,6 +120,17 @@ def _positive_vector(values, name) -> np.ndarray:
     if arr.ndim != 1 or len(arr) == 0 or not np.all(np.isfinite(arr) & (arr > 0)):
         raise InputError(f"{name} must be positive finite numbers, got {np.asarray(values).tolist()}")
     return arr
+
+
+# NumPy bytes per case while ``sweep_cases`` builds them: m0, inertia, h and three int64
+# indices (80 B), the meshgrid's and the lattice's temporaries (about as much again), rounded up
+BYTES_PER_CASE = 256
+
+
+def _case_memory(n: int, what: str):
+    """Refuse a set of cases that would not fit in the host's available memory."""
+    fits(n * BYTES_PER_CASE, f"sweep_cases: {n:,} cases ({what})",
+         f"at most {max(1, available_memory() // BYTES_PER_CASE):,} cases fit: sweep them in parts")
 
 
 def physical(ratios) -> np.ndarray:
@@ -139,11 +150,15 @@ def sweep_cases(*, states=8, ratios=((1.0, 0.5),), step_sizes=(0.1,), sampling: 
     lattice, or an array of directions, normalised), ``ratios`` (pairs (I2/I1, I3/I1)) and
     ``step_sizes``, ordered ratio-major, then h, then state; ``*_index`` give the position
     of each case in each axis, so ``out[key].reshape(K_ratios, K_h, K_states)`` works.
+    A ratio pair of a non-physical body warns (``RigidBody``'s policy) unless
+    ``physical_only=False``.
 
     ``sampling="random"``: ``n_samples`` cases with m0 uniform on the sphere, each ratio
     log-uniform in ``ratio_range`` (rejecting non-physical bodies when ``physical_only``)
     and h log-uniform in ``h_range``; reproducible from ``seed``. Arrays in ``dtype``
-    (default float): ``m0``, ``inertia`` (N, 3), ``h`` (N,), indices int (N,).
+    (default float): ``m0``, ``inertia`` (N, 3), ``h`` (N,), indices int (N,). The number of
+    cases is refused before anything is built when they would not fit in the available memory
+    (``BYTES_PER_CASE`` each).
 
     >>> import jaxsplit
     >>> cases = jaxsplit.sweep_cases(states=4, ratios=[(1.0, 0.5), (0.8, 0.6)], step_sizes=[0.1, 0.05])
@@ -152,13 +167,19 @@ def sweep_cases(*, states=8, ratios=((1.0, 0.5),), step_sizes=(0.1,), sampling: 
     """
     dt = _float_dtype(dtype)
     if sampling == "grid":
-        s, r, h = _states_array(states), _ratios_array(ratios), _positive_vector(step_sizes, "step_sizes")
+        r, h = _ratios_array(ratios), _positive_vector(step_sizes, "step_sizes")
+        # a non-physical body warns for now, as the constructors do (``check_moments``)
+        check_moments(np.concatenate([np.ones((len(r), 1)), r], axis=1), "the ratios' body I",
+                      None if physical_only else True, "physical_only=False")
+        n_states = count(states, "states") if np.ndim(states) == 0 else len(np.asarray(states))
+        _case_memory(n_states * len(r) * len(h), f"{n_states:,} states x {len(r):,} ratios x {len(h):,} step sizes")
+        s = _states_array(states)
         ri, hi, si = (a.ravel() for a in np.meshgrid(np.arange(len(r)), np.arange(len(h)),
                                                       np.arange(len(s)), indexing="ij"))
         m0, ratio, step = s[si], r[ri], h[hi]
     elif sampling == "random":
-        if not isinstance(n_samples, (int, np.integer)) or n_samples < 1:
-            raise InputError(f"random sampling needs n_samples >= 1, got {n_samples!r}")
+        n_samples = count(n_samples, "n_samples (random sampling)")
+        _case_memory(n_samples, "n_samples")
         lo, hi_ = _positive_vector(ratio_range, "ratio_range")[[0, -1]]
         hlo, hhi = _positive_vector(h_range, "h_range")[[0, -1]]
         if not (lo <= hi_ and hlo <= hhi):
@@ -262,7 +283,7 @@ MAX_REFINEMENTS = 3
 
 def reference_solution(x0, params, t_end: float, *, system=None, scheme="kahan-li-8", split=None,
                        angle: float = 0.1, tol: float = REFERENCE_TOL, chunk_size: int = 1024, devices=None,
-                       **split_options):
+                       allow_nonphysical: bool | None = None, **split_options):
     """x(t_end) for each case (x0[i], params[i]) of the family ``system`` (default
     ``RigidBody``: x0 = m0 (N, 3), params = inertia (N, 3)), by ``scheme`` (8th order by
     default) on the system's ``reference_split`` (or ``split`` with ``split_options``) with
@@ -273,11 +294,12 @@ def reference_solution(x0, params, t_end: float, *, system=None, scheme="kahan-l
 
     >>> import numpy as np, jaxsplit
     >>> case = jaxsplit.STANDARD_CASE
-    >>> ref, acc = jaxsplit.reference_solution(np.array([case.m0]), np.array([case.inertia]), case.t_end)
+    >>> ref, acc = jaxsplit.reference_solution(np.array([case.m0]), np.array([case.inertia]), case.t_end,
+    ...                                        allow_nonphysical=True)            # (2, 1, 2/3): see STANDARD_CASE
     >>> bool(np.max(np.abs(ref[0] - np.array(case.reference))) < 1e-12), bool(acc[0] < 1e-12)
     (True, True)
     """
-    family = family_of(system)
+    family = family_of(system, allow_nonphysical)
     scheme = schemes.resolve(scheme)
     _, x0, params, _ = case_arrays({"x0": x0, "params": params, "h": np.ones(len(jax.tree_util.tree_leaves(x0)[0]))})
     build(family, params)  # validates the concrete batch
@@ -318,10 +340,11 @@ def _check_t_end(t_end):
 
 def sweep(scheme, cases: dict, *, t_end: float, system=None, split: str | None = None,
           reference_scheme="kahan-li-8", reference_angle: float = 0.1, chunk_size: int = 1024,
-          devices=None, **split_options) -> dict:
+          devices=None, allow_nonphysical: bool | None = None, **split_options) -> dict:
     """Evaluate ``scheme`` on every case (see the module docstring for the inputs and outputs):
     a dict of NumPy arrays with a leading case axis N. The cases are traced (one compilation
-    per chunk shape); ``scheme``, ``split`` and its options are static.
+    per chunk shape); ``scheme``, ``split`` and its options are static. ``allow_nonphysical``
+    applies to the default family's bodies, as for ``RigidBody``.
 
     >>> import jaxsplit
     >>> cases = jaxsplit.sweep_cases(states=4, ratios=[(0.5, 0.25)], step_sizes=[0.1])
@@ -330,7 +353,7 @@ def sweep(scheme, cases: dict, *, t_end: float, system=None, split: str | None =
     ((4,), True, True)
     """
     scheme = schemes.resolve(scheme)
-    family = family_of(system)
+    family = family_of(system, allow_nonphysical)
     t_end = _check_t_end(t_end)
     if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1:
         raise InputError(f"chunk_size must be an integer >= 1, got {chunk_size!r}")

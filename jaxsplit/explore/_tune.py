@@ -27,6 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from .._bounds import MAX_STAGES, WHY_STAGES, at_most, count, fits
 from ..core._errors import InputError
 from ..core._schemes import Scheme
 from ..core._state import as_state, leading_size
@@ -120,12 +121,15 @@ def tune_scheme(params, states, *, system=None, stages: int = 5, t_end: float = 
     """
     if not (isinstance(stages, int) and stages >= 5 and stages % 2 == 1):
         raise InputError(f"stages must be an odd integer >= 5 (3 stages leave no freedom), got {stages!r}")
+    at_most(stages, MAX_STAGES, "stages", WHY_STAGES)
+    iterations = count(iterations, "iterations", 0, 2**31 - 1, "a lax.scan length, counted in int32")
+    scan_points = count(scan_points, "scan_points", 0, 2**31 - 1, "the objective is evaluated at every point")
+    fits(scan_points * 64, f"a scan of {scan_points:,} points", "give fewer scan_points")
     family = family_of(system)
     if any(isinstance(v, str) and v == "auto" for v in split_options.values()):
         raise InputError("tune_scheme runs every training system in one traced batch: give explicit split "
                          f"options, not 'auto' (got {split_options})")
-    if not (isinstance(n_steps, int) and n_steps >= 1):
-        raise InputError(f"n_steps must be an integer >= 1, got {n_steps!r}")
+    n_steps = count(n_steps, "n_steps")
     params, states = _check_set(params, states, family)
     first = build(family, jax.tree_util.tree_map(lambda a: a[0], params))
     first.split(split, **split_options)  # a clear error now for an unknown split or option

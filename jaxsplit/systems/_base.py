@@ -66,6 +66,12 @@ class AbstractSystem(eqx.Module):
     def poisson_matrix(self, x):
         """Π(x), (n, n) over the n floating components of x in ``ravel`` order."""
 
+    def check_state(self, x):
+        """``x`` as a state of this system, checked where concrete (``InputError`` otherwise);
+        the flows of its splits call it (``integrate`` checks the initial state). Default:
+        any state."""
+        return x
+
     def casimirs(self) -> dict[str, Callable]:
         """Functions conserved by every Poisson map of this structure (name -> x -> scalar)."""
         return {}

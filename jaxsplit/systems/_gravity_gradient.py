@@ -20,13 +20,14 @@ import jax
 import jax.numpy as jnp
 
 from ._potential import BodyInPotential
-from ._rigid_body import check_inertia
-from ._validate import check_non_negative
+from ._rigid_body import check_inertia, flag
+from ._validate import check_batches, check_non_negative
 
 
 class GravityGradient(BodyInPotential):
     """A rigid satellite (principal moments ``inertia``) in the gravity gradient of a planet,
-    orbital rate ``rate`` = Ω >= 0. Batched leading axes allowed; every parameter is traced.
+    orbital rate ``rate`` = Ω >= 0. Batched leading axes allowed (as for ``HeavyTop``); every
+    parameter is traced. ``allow_nonphysical`` as for ``RigidBody``.
 
     >>> import jax.numpy as jnp, jaxsplit
     >>> satellite = jaxsplit.gravity_gradient(jnp.array([2.0, 1.0, 2 / 3]), 0.1)
@@ -37,9 +38,10 @@ class GravityGradient(BodyInPotential):
     inertia: jax.Array
     rate: jax.Array
 
-    def __init__(self, inertia, rate):
-        self.inertia = check_inertia(inertia)
+    def __init__(self, inertia, rate, allow_nonphysical: bool | None = None):
+        self.inertia = check_inertia(inertia, allow_nonphysical=flag(allow_nonphysical))
         self.rate = check_non_negative(rate, "rate")
+        check_batches(inertia=self.inertia.shape[:-1], rate=self.rate.shape)
 
     def potential(self, gamma):
         """(3/2) Ω² ⟨Γ, IΓ⟩."""
@@ -58,7 +60,7 @@ class GravityGradient(BodyInPotential):
         return spin * eye, eye
 
 
-def gravity_gradient(inertia, rate) -> GravityGradient:
+def gravity_gradient(inertia, rate, *, allow_nonphysical: bool | None = None) -> GravityGradient:
     """A satellite in the gravity-gradient field, state (m, Γ): V = (3/2) rate² ⟨Γ, IΓ⟩.
 
     >>> import jax.numpy as jnp, jaxsplit
@@ -68,4 +70,4 @@ def gravity_gradient(inertia, rate) -> GravityGradient:
     >>> abs(float(gamma @ gamma) - 1) < 1e-13
     True
     """
-    return GravityGradient(inertia, rate)
+    return GravityGradient(inertia, rate, allow_nonphysical)

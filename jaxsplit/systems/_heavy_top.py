@@ -19,14 +19,16 @@ import jax
 import jax.numpy as jnp
 
 from ._potential import BodyInPotential
-from ._rigid_body import check_inertia
-from ._validate import check_non_negative, check_vector
+from ._rigid_body import check_inertia, flag
+from ._validate import check_batches, check_non_negative, check_vector
 
 
 class HeavyTop(BodyInPotential):
     """A heavy top: principal moments ``inertia``, centre of mass ``center_of_mass`` (body
     frame), ``weight`` = M g >= 0 (zero: a free body carrying the vertical). Batched leading
-    axes allowed; every parameter is traced.
+    axes allowed (their batch shapes must broadcast, and a state needs the parameters' batch:
+    one state is never integrated with several weights); every parameter is traced.
+    ``allow_nonphysical`` as for ``RigidBody`` (a body violating the triangle inequalities).
 
     >>> import jax.numpy as jnp, jaxsplit
     >>> top = jaxsplit.heavy_top(jnp.array([2.0, 1.0, 2 / 3]), jnp.array([0.0, 0.0, 0.5]), 1.0)
@@ -38,10 +40,12 @@ class HeavyTop(BodyInPotential):
     center_of_mass: jax.Array
     weight: jax.Array
 
-    def __init__(self, inertia, center_of_mass, weight=1.0):
-        self.inertia = check_inertia(inertia)
+    def __init__(self, inertia, center_of_mass, weight=1.0, allow_nonphysical: bool | None = None):
+        self.inertia = check_inertia(inertia, allow_nonphysical=flag(allow_nonphysical))
         self.center_of_mass = check_vector(center_of_mass, "center_of_mass")
         self.weight = check_non_negative(weight, "weight")
+        check_batches(inertia=self.inertia.shape[:-1], center_of_mass=self.center_of_mass.shape[:-1],
+                      weight=self.weight.shape)
 
     def potential(self, gamma):
         """weight ⟨Γ, χ⟩: the height of the centre of mass times M g."""
@@ -63,7 +67,7 @@ class HeavyTop(BodyInPotential):
         return jnp.stack([spin * n, spin * n]), jnp.stack([n, -n])
 
 
-def heavy_top(inertia, center_of_mass, weight=1.0) -> HeavyTop:
+def heavy_top(inertia, center_of_mass, weight=1.0, *, allow_nonphysical: bool | None = None) -> HeavyTop:
     """The heavy top, state (m, Γ): H = Σ m_i²/(2I_i) + weight ⟨Γ, χ⟩ (see ``HeavyTop``).
 
     >>> import jax.numpy as jnp, jaxsplit
@@ -75,4 +79,4 @@ def heavy_top(inertia, center_of_mass, weight=1.0) -> HeavyTop:
     >>> abs(float(gamma @ gamma) - 1) < 1e-13, abs(float(m @ gamma - x0[0] @ x0[1])) < 1e-13   # Casimirs
     (True, True)
     """
-    return HeavyTop(inertia, center_of_mass, weight)
+    return HeavyTop(inertia, center_of_mass, weight, allow_nonphysical)

@@ -31,6 +31,7 @@ import numpy as np
 
 from ..core._errors import InputError
 from ..core._flows import AbstractKick
+from ..core._state import fits_batch
 from ._base import AbstractSystem
 from ._rigid_body import is_concrete
 from ._spin import Commuting, MomentumSpin
@@ -48,10 +49,24 @@ class PotentialKick(AbstractKick):
 
     potential: Callable
 
+    def check_state(self, x):
+        """The states of the system the potential belongs to (a bound method's owner)."""
+        owner = getattr(self.potential, "__self__", None)
+        # through the class: a bound method of an equinox module is a module built per lookup
+        return type(owner).check_state(owner, x) if isinstance(owner, AbstractSystem) else x
+
     def velocity(self, state):
         """(the torque Γ × ∇V(Γ), None: Γ does not move)."""
         check_shape(state[0], "momentum")
         gamma = check_shape(state[1], "vector")
+        # V has one value per state: a larger shape means a parameter batch (several weights,
+        # rates, centres of mass) broadcast over one state, whose summed torque matches none
+        # of them (shapes are static: checked under jit too)
+        batch = jax.eval_shape(self.potential, gamma).shape
+        if not fits_batch(batch, gamma.shape[:-1]):
+            raise InputError(f"the potential's parameters have batch shape {tuple(batch)} but the state's batch "
+                             f"shape is {tuple(gamma.shape[:-1])}: give one state per parameter set, shape "
+                             f"{tuple(batch) + (3,)}, or vmap over the parameters")
         force = jax.grad(lambda g: jnp.sum(self.potential(g)))(gamma)
         return jnp.cross(gamma, force), None
 
@@ -82,10 +97,11 @@ class BodyInPotential(AbstractSystem):
         """``x`` as a state of this system, checked where concrete: a tuple (m, Γ) of finite
         (..., 3) arrays with Γ a unit vector (to √ε of its dtype; |Γ| is a Casimir, so a state
         from a long run passes). Returns ``x``."""
-        _, gamma = self._parts(x)
-        check_finite_state(x, f"the state of {self.name}")
+        _, gamma = BodyInPotential._parts(self, x)
+        check_finite_state(x, f"the state of {type(self).__name__}")
         if is_concrete(gamma):
-            check_unit(np.linalg.norm(np.asarray(gamma), axis=-1), "Γ must be a unit vector", "|Γ|", gamma.dtype)
+            g = np.asarray(gamma)
+            check_unit(np.sqrt(np.einsum("...i,...i->...", g, g)), "Γ must be a unit vector", "|Γ|", g.dtype)
         return x
 
     def kinetic_energy(self, x):

@@ -20,6 +20,7 @@ Splits (axes are counted from 0, as everywhere in the library):
 one rotation about the symmetry axis k by the angle (1/I_k − 1/I_i) m_k t.
 """
 
+import warnings
 from typing import ClassVar, NamedTuple
 
 import jax
@@ -50,19 +51,80 @@ def as_float_array(x, name: str):
     return arr
 
 
-def check_inertia(inertia, name: str = "inertia"):
+_TRIANGLE = ((0, 1, 2), (1, 2, 0), (2, 0, 1))  # I_a + I_b >= I_c, axes labelled 1, 2, 3 like I1, I2, I3
+
+
+def check_moments(values, name: str = "inertia", allow_nonphysical: bool | None = False,
+                  flag: str = "allow_nonphysical=True"):
+    """Concrete principal moments (..., 3), the one check of the library and the command line
+    (which passes its option names): finite, > 0, each 1/I representable in their dtype, and
+    the triangle inequalities I_a + I_b >= I_c of a physical body unless ``allow_nonphysical``
+    (the Euler equations hold for any positive moments: the flag says that such a body is
+    wanted). The first failing body of a batch is named. ``allow_nonphysical=None`` (the
+    constructors' default for now) warns instead of refusing: the project's standard test
+    body (2, 1, 2/3) is itself non-physical, and its uses say so one by one before the
+    default becomes False (``FutureWarning``)."""
+    values = np.asarray(values)
+    shown = ",".join(f"{float(v):g}" for v in values.reshape(-1)[:3]) if values.size == 3 else str(values.tolist())
+    if not np.all(np.isfinite(values)):
+        raise InputError(f"{name} must be finite, got {shown}")
+    if not np.all(values > 0):
+        raise InputError(f"{name} must be positive (I1, I2, I3 > 0), got {shown}")
+    with np.errstate(over="ignore", divide="ignore"):
+        inverse = 1 / values
+    if not np.all(np.isfinite(inverse)):
+        k = int(np.argmin(np.isfinite(inverse)) % 3)
+        raise InputError(f"{name} {shown}: 1/I{k + 1} overflows {values.dtype} (each moment must be at least "
+                         f"{1 / np.finfo(values.dtype).max:.2g})")
+    if allow_nonphysical:
+        return values
+    rows = values.reshape(-1, 3)
+    for a, b, c in _TRIANGLE:
+        bad = rows[:, a] + rows[:, b] < rows[:, c]
+        if np.any(bad):
+            i = rows[int(np.argmax(bad))]
+            where = f" (body {int(np.argmax(bad))} of the batch)" if len(rows) > 1 else ""
+            message = (f"{name} {','.join(f'{float(v):g}' for v in i)}{where} is not a physical body: triangle "
+                       f"inequality I{a + 1} + I{b + 1} >= I{c + 1} fails ({i[a]:g} + {i[b]:g} < {i[c]:g}); "
+                       f"pass {flag} to integrate it anyway")
+            if allow_nonphysical is None:
+                warnings.warn(message + " (refused from a later version on; allow_nonphysical=False refuses it now)",
+                              FutureWarning, stacklevel=6)  # the caller of the constructor
+                return values
+            raise InputError(message)
+    return values
+
+
+def check_inertia(inertia, name: str = "inertia", allow_nonphysical: bool | None = False):
     """Principal moments (..., 3): the shape always (it is static, also under ``jit``), the
-    values > 0 and finite when concrete."""
+    values when concrete (``check_moments``: a physical body unless ``allow_nonphysical``)."""
     inertia = as_float_array(inertia, name)
     if inertia.ndim < 1 or inertia.shape[-1] != 3:
         raise InputError(f"{name} must have 3 components (I1, I2, I3), got shape {tuple(inertia.shape)}")
     if is_concrete(inertia):
-        values = np.asarray(inertia)
-        if not np.all(np.isfinite(values)):
-            raise InputError(f"{name} must be finite, got {values.tolist()}")
-        if not np.all(values > 0):
-            raise InputError(f"{name} must be positive, got {values.tolist()}")
+        check_moments(np.asarray(inertia), name, allow_nonphysical)
     return inertia
+
+
+def shift_axis(inertia, shift="auto") -> int:
+    """The Casimir shift axis (0-based) of the moments ``inertia``: ``shift`` itself, or the axis
+    of the middle 1/I for "auto" (concrete, one body)."""
+    if isinstance(shift, str) and shift == "auto":
+        if not is_concrete(inertia):
+            raise InputError("shift='auto' needs concrete inertia; inside jit/vmap/grad pass shift=0, 1 or 2")
+        if np.ndim(inertia) != 1:
+            raise InputError("shift='auto' needs a single body; for a batch pass shift=0, 1 or 2")
+        return middle_axis(1 / np.asarray(inertia))
+    if isinstance(shift, (bool, np.bool_)) or shift not in (0, 1, 2):
+        raise InputError(f"shift must be 0, 1, 2 (the axis, counted from 0) or 'auto', got {shift!r}")
+    return int(shift)
+
+
+def flag(value, name: str = "allow_nonphysical"):
+    """A keyword flag: True, False or None (the default) only (a truthy array or string is a mistake)."""
+    if value is not None and not isinstance(value, (bool, np.bool_)):
+        raise InputError(f"{name} must be True or False, got {value!r}")
+    return None if value is None else bool(value)
 
 
 def middle_axis(inverse_inertia) -> int:
@@ -74,7 +136,10 @@ class RigidBody(AbstractSystem):
     """A free rigid body with principal moments of inertia ``inertia = (I1, I2, I3) > 0``.
 
     ``inertia`` may carry leading batch axes (shape ``(..., 3)``); the methods act on states
-    ``m`` of shape ``(..., 3)``.
+    ``m`` of shape ``(..., 3)``. Concrete moments must satisfy the triangle inequalities of a
+    physical body (I1 + I2 >= I3 and its permutations): ``allow_nonphysical=False`` refuses
+    another body, ``True`` says it is wanted (the Euler equations hold for any positive
+    moments), and the default (None) accepts it with a ``FutureWarning`` (``check_moments``).
 
     >>> import jax.numpy as jnp, jaxsplit
     >>> body = jaxsplit.RigidBody(jnp.array([2.0, 1.0, 2 / 3]))
@@ -90,8 +155,8 @@ class RigidBody(AbstractSystem):
     inertia: jax.Array
     refused_splits: ClassVar[dict[str, str]] = {}
 
-    def __init__(self, inertia):
-        self.inertia = check_inertia(inertia)
+    def __init__(self, inertia, allow_nonphysical: bool | None = None):
+        self.inertia = check_inertia(inertia, allow_nonphysical=flag(allow_nonphysical))
 
     def _inverse_inertia(self, m):
         # Computation follows the state's dtype (float32 in -> float32 out).
@@ -149,15 +214,7 @@ class RigidBody(AbstractSystem):
 
     def shift_axis(self, shift="auto") -> int:
         """The Casimir shift axis (0-based): ``shift`` itself, or the middle 1/I for "auto"."""
-        if isinstance(shift, str) and shift == "auto":
-            if not is_concrete(self.inertia):
-                raise InputError("shift='auto' needs concrete inertia; inside jit/vmap/grad pass shift=0, 1 or 2")
-            if np.ndim(self.inertia) != 1:
-                raise InputError("shift='auto' needs a single body; for a batch pass shift=0, 1 or 2")
-            return middle_axis(1 / np.asarray(self.inertia))
-        if isinstance(shift, (bool, np.bool_)) or shift not in (0, 1, 2):
-            raise InputError(f"shift must be 0, 1, 2 (the axis, counted from 0) or 'auto', got {shift!r}")
-        return int(shift)
+        return shift_axis(self.inertia, shift)
 
     def casimir_split(self, shift="auto", shift_axis=None) -> tuple:
         """Two rotations: H − C/I_k, k = ``shift`` (0-based) or the middle 1/I ("auto")."""
@@ -220,7 +277,8 @@ def symmetry_axis(body: RigidBody) -> int:
 
 
 class StandardCase(NamedTuple):
-    """The asymmetric test case of Hairer–Lubich–Wanner (GNI) with a 30-digit reference."""
+    """The asymmetric test case of Hairer–Lubich–Wanner (GNI) with a 30-digit reference. Its
+    body (2, 1, 2/3) is not a physical one (1 + 2/3 < 2): build it with ``allow_nonphysical=True``."""
 
     inertia: tuple = (2.0, 1.0, 2.0 / 3.0)
     m0: tuple = (float(np.cos(1.1)), 0.0, float(np.sin(1.1)))

@@ -69,6 +69,13 @@ class MomentumSpin(AbstractFlow):
     rate: jax.Array = eqx.field(converter=jnp.asarray)
     parts: tuple | None = eqx.field(static=True, default=None, converter=check_parts)
 
+    def check_state(self, x):
+        if self.parts is None or "attitude" not in self.parts and "quaternion" not in self.parts:
+            return x  # momenta and body vectors: any vector
+        from ._validate import check_parts as check_values  # _validate builds on so3
+
+        return check_values(x, self.parts)
+
     def __call__(self, state, t):
         m = momentum(state, self.parts)
         if self.parts is None:  # on so(3)* alone the flow is the identity

@@ -444,6 +444,14 @@ class AbstractRotation(AbstractFlow):
         _check_batch(jnp.shape(self.rate), m.shape[:-1])
         return m
 
+    def check_state(self, x):
+        """The declared parts' values (``_validate.check_parts``): an attitude must be a rotation."""
+        if self.parts is None or "attitude" not in self.parts and "quaternion" not in self.parts:
+            return x  # momenta and body vectors: any vector
+        from ._validate import check_parts as check_values  # _validate builds on so3
+
+        return check_values(x, self.parts)
+
 
 def _check_batch(parameter_shape, state_batch):
     """A batched body (leading axes on its parameters) needs states with those axes: the state
