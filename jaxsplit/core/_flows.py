@@ -165,7 +165,7 @@ def check_state(step, x):
     a plain function declares nothing. Called through the class: cheap for a remembered step.
     A state spread over several processes (a global array that this process cannot read whole)
     is not fetched: each process would see only its own shards."""
-    if isinstance(step, AbstractFlow) and all(getattr(leaf, "is_fully_addressable", True)
+    if isinstance(step, AbstractFlow) and all(isinstance(leaf, jax.core.Tracer) or getattr(leaf, "is_fully_addressable", True)
                                               for leaf in jax.tree_util.tree_leaves(x)):
         type(step).check_state(step, x)
     return x
