@@ -27,7 +27,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ._one_kernel import one_kernel
+from ._one_kernel import one_kernel, one_kernel_jvp
 
 _SELECTS = contextvars.ContextVar("jaxsplit_selects", default=False)
 _PLAIN = contextvars.ContextVar("jaxsplit_plain_loops", default=False)
@@ -62,11 +62,11 @@ def threaded(body, carry, invariants, n, one_call: bool = True):
 
     def through(c):
         state, inv = c
-        with _switched_on(_SELECTS):
+        with _switched_on(_SELECTS) if not _PLAIN.get() else contextlib.nullcontext():
             state = body(state, eqx.combine(inv, rest))
         return jax.lax.optimization_barrier((state, inv))
 
-    run = (lambda loop, *args: loop(*args)) if _PLAIN.get() or not one_call else one_kernel
+    run = one_kernel if one_call else (lambda loop, *args: loop(*args))
     if isinstance(n, int):
         return run(lambda c: jax.lax.scan(lambda c, _: (through(c), None), c, length=n)[0][0], (carry, arrays))
     # a traced count: a while loop whose bound goes through the barrier too (a fori_loop carries
@@ -106,4 +106,6 @@ def _repeated_jvp(body, remat, n, primals, tangents):
         step = remat(lambda y: body(y, arrays))
         return jax.lax.scan(lambda y, _: (step(y), None), carry, length=n)[0]
 
-    return jax.jvp(closed, primals, tangents)
+    if _PLAIN.get():
+        return jax.jvp(closed, primals, tangents)
+    return one_kernel_jvp(closed, primals, tangents)

@@ -73,13 +73,42 @@ def one_kernel(loop, *args):
     return jax.tree_util.tree_unflatten(tree, _one_kernel_p.bind(*leaves))
 
 
+def one_kernel_jvp(loop, primals, tangents):
+    """``jax.jvp(loop, primals, tangents)`` as one call whose primal and tangent outputs are
+    each tagged (the JVP of a differentiated stepping loop). Under reverse mode JAX splits the
+    call into its primal part (tagged as it is) and its tangent part, whose transpose, the
+    backward loop, is tagged by the primitive's transpose: the gradient's loops compile as
+    one kernel each, as the forward run's does (a stored-trajectory gradient of one body ran
+    20× its forward run as XLA's dispatched loop, ~3× as one kernel)."""
+    # the tangents pass the primitive on their way in too: in the transposed program that
+    # binding comes after the backward loop, whose call it then tags
+    flat, flat_tree = jax.tree_util.tree_flatten(tangents)
+    tangents = jax.tree_util.tree_unflatten(flat_tree, _one_kernel_p.bind(*flat))
+    out, out_dot = jax.jit(lambda p, t: jax.jvp(loop, p, t))(primals, tangents)
+    leaves, tree = jax.tree_util.tree_flatten(out)
+    dots, dot_tree = jax.tree_util.tree_flatten(out_dot)
+    return (jax.tree_util.tree_unflatten(tree, _one_kernel_p.bind(*leaves)),
+            jax.tree_util.tree_unflatten(dot_tree, _one_kernel_p.bind(*dots)))
+
+
 _one_kernel_p = Primitive("jaxsplit_one_kernel")
 _one_kernel_p.multiple_results = True
 _one_kernel_p.def_impl(lambda *xs: xs)
 _one_kernel_p.def_abstract_eval(lambda *avals: avals)
 batching.primitive_batchers[_one_kernel_p] = lambda args, dims: (_one_kernel_p.bind(*args), dims)
-# the identity to differentiation: tangents pass untouched, so there is nothing to transpose
-ad.primitive_jvps[_one_kernel_p] = lambda primals, tangents: (_one_kernel_p.bind(*primals), tangents)
+# linear (the identity): tangents and cotangents pass through it, and so does the tag, to the
+# call that produces them
+def _jvp(primals, tangents):
+    tangents = [ad.instantiate_zeros(t) for t in tangents]
+    return _one_kernel_p.bind(*primals), _one_kernel_p.bind(*tangents)
+
+
+def _transpose(cts, *args):
+    return _one_kernel_p.bind(*[ad.instantiate_zeros(ct) for ct in cts])
+
+
+ad.primitive_jvps[_one_kernel_p] = _jvp
+ad.primitive_transposes[_one_kernel_p] = _transpose
 
 
 def _state_bytes(avals) -> int:
@@ -113,11 +142,14 @@ def _compilable(function, symbols, seen, in_loop: bool = False) -> bool:
 
 
 def _call_to_tag(ctx, values):
-    """The ``func.call`` producing ``values`` if the loop should run as one kernel, else None."""
+    """The ``func.call`` producing ``values`` if the loop should run as one kernel, else None
+    (values made elsewhere, such as the zero cotangent of an input the loop does not use,
+    are no call's: one call among the owners is the loop's)."""
     owners = {None if isinstance(v.owner, mlir.ir.Block) else v.owner.operation for v in values}
-    call = owners.pop()
-    if owners or call is None or call.name != "func.call" or _state_bytes(ctx.avals_in) > ONE_KERNEL_BYTES:
+    calls = [op for op in owners if op is not None and op.name == "func.call"]
+    if len(calls) != 1 or _state_bytes(ctx.avals_in) > ONE_KERNEL_BYTES:
         return None
+    call = calls[0]
     callee = mlir.ir.FlatSymbolRefAttr(call.attributes["callee"]).value
     symbols = ctx.module_context.symbol_table
     return call if _compilable(symbols[callee], symbols, {(callee, False)}) else None

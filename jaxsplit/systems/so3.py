@@ -500,7 +500,7 @@ class AxisRotation(AbstractRotation):
             c, s = evaluated_once(c, s)
         if self.parts is None:  # the free body: the bare two-component update (hot path)
             return _turn_axis(state, self.axis, c, s)
-        e = jnp.zeros(3, half.dtype).at[self.axis].set(1)
+        e = jnp.asarray(np.eye(3)[self.axis], half.dtype)  # a constant (a scatter would keep the loop off one kernel)
         return _turn_state(state, self.parts,
                            lambda x, extra: _turn_axis(x, self.axis, _expand(c, extra), _expand(s, extra),
                                                        select=False),
