@@ -9,6 +9,7 @@ boundary as well (first-same-as-last); ``Composition.advance`` does that inside 
 of a given word length shares one compilation.
 """
 
+import contextlib
 import functools
 from collections.abc import Sequence
 
@@ -19,7 +20,7 @@ import numpy as np
 
 from ._errors import InputError
 from ._flows import AbstractFlow, as_flow, split_parameters, sum_to_shape
-from ._loops import repeated, threaded
+from ._loops import plain_loops, repeated, threaded
 from ._schemes import Scheme, schemes
 from ._state import float_dtype
 
@@ -111,7 +112,8 @@ UNROLLED_UP_TO = 8
 
 
 def run_word(w: Word, carry, one, invariants, guarded: bool = False):
-    """``carry = one(piece, weight, carry, invariants)`` for each (piece, weight) of ``w`` in order.
+    """``carry = one(piece, weight, carry, invariants)`` for each (piece, weight) of ``w`` in order;
+    ``invariants`` is (flows, h).
 
     A word longer than ``UNROLLED_UP_TO`` that repeats a pattern of pieces (every scheme's does:
     a Strang or Lie step's pieces in a fixed order, only the weights differ) runs as a loop over
@@ -130,10 +132,10 @@ def run_word(w: Word, carry, one, invariants, guarded: bool = False):
     period = _period(pieces) if pieces else 1
     reps = len(w) // period if len(w) > UNROLLED_UP_TO else 0
     if reps >= 2:
-        leaves = jax.tree_util.tree_leaves(invariants)
-        dtype = next((x.dtype for x in leaves if eqx.is_array(x) and jnp.issubdtype(x.dtype, jnp.floating)),
-                     jnp.result_type(float))
-        weights = jnp.asarray(np.array([c for _, c in w[:reps * period]]).reshape(reps, period), dtype)
+        # the weights in the step size's dtype (invariants = (flows, h), h in the state's): a
+        # float32 state must not meet float64 weights (the flows' parameters may be float64)
+        weights = jnp.asarray(np.array([c for _, c in w[:reps * period]]).reshape(reps, period),
+                              jnp.result_type(invariants[1]))
 
         def repetition(carry_k, inv_weights):
             c, k = carry_k
@@ -222,7 +224,7 @@ def _joint_layout(state, cotangent):
     one state: the same time, other fusion, so round-off differs)."""
     leaves, treedef = jax.tree_util.tree_flatten(state)
     if len({(jnp.shape(leaf), jnp.result_type(leaf)) for leaf in leaves + jax.tree_util.tree_leaves(cotangent)}) != 1:
-        return (lambda x, ct: (x, ct)), (lambda joint: joint)
+        return (lambda x, ct: (x, ct)), (lambda joint: joint), (lambda joint, x: (x, joint[1]))
     size = len(leaves)
 
     def pack(x, ct):
@@ -231,7 +233,10 @@ def _joint_layout(state, cotangent):
     def unpack(joint):
         return tuple(jax.tree_util.tree_unflatten(treedef, list(joint[k * size:(k + 1) * size])) for k in (0, 1))
 
-    return pack, unpack
+    def restart(joint, x):  # the state part replaced, written in place
+        return pack(x, unpack(joint)[1]) if size == 1 else joint.at[:size].set(jnp.stack(jax.tree_util.tree_leaves(x)))
+
+    return pack, unpack, restart
 
 
 @functools.cache
@@ -322,6 +327,21 @@ class Composition(AbstractFlow):
     def uses_selects(self) -> bool:
         return _guarded(self.flows)
 
+    @property
+    def keeps_a_part(self) -> bool:
+        """Whether some part of the state is declared ``"fixed"`` by every flow: a loop over
+        steps then returns it unchanged, and such a loop runs as plain loops, not one kernel
+        (inside another loop, a user's ``lax.scan`` or a checkpointed block, XLA's one-kernel
+        emitter aborted the process on it: "All or none of the slices should have an
+        explicit index"; ``tests/test_one_kernel.py``)."""
+        parts = [getattr(f, "parts", None) for f in self.flows]
+        if any(p is None for p in parts):
+            return False
+        return any(all(p[i] == "fixed" for p in parts) for i in range(min(map(len, parts))))
+
+    def _loops(self):
+        return plain_loops() if self.keeps_a_part else contextlib.nullcontext()
+
     def entries(self) -> Word:
         """Every (piece, weight) sub-flow a call or a run may evaluate (sub-steps are weight·h),
         merges across steps included."""
@@ -349,20 +369,29 @@ class Composition(AbstractFlow):
         (head and tail run once per call, rolled where long: ``_apply_once``)."""
         return _sequences(self._parts, self.fsal)
 
-    def retrace(self, x_after, h, n, ct_after):
+    def retrace(self, x_after, h, n, ct_after, kept=None):
         """The reversible adjoint's backward pass over ``n`` steps: ``advance``'s exact
         sequence of sub-flows walked backwards, each flow's ``step_back`` rebuilding the
         state before it and pulling the cotangent through it. Returns (x0, ct_x0,
         ct_parameters in ``split_parameters`` order, ct_h); memory independent of n. Needs
         reversible flows (φ_{−t} = φ_t⁻¹), not a symmetric scheme: the word is inverted
-        sub-flow by sub-flow."""
+        sub-flow by sub-flow.
+
+        ``kept`` (``advance(..., keep=True)``'s trajectory, for a Python int ``n`` ≥ 2): the
+        walk restarts each step from the kept state instead of the rebuilt one, so round-off
+        does not accumulate over the steps (the stored adjoint's backward pass)."""
+        with self._loops():
+            return self._retrace(x_after, h, n, ct_after, kept)
+
+    def _retrace(self, x_after, h, n, ct_after, kept):
+        """The body of ``retrace``."""
         h = _like_state(h, x_after)
         # one accumulator per flow, shaped as its step_back returns them (per state for a batch:
         # summed once at the end; a sum over the batch at every sub-flow cost 5 kernels a step)
         given = jax.eval_shape(lambda x, ct: [f.step_back(x, h, ct)[2:] for f in self.flows], x_after, ct_after)
         zeros = tuple(jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), g) for g in given)
 
-        pack, unpack = _joint_layout(x_after, ct_after)
+        pack, unpack, restart = _joint_layout(x_after, ct_after)
 
         def back_one(piece, weight, joint, acc, flows=self.flows, h=h):  # one sub-flow undone, cotangents added
             x, ct = unpack(joint)
@@ -394,9 +423,15 @@ class Composition(AbstractFlow):
         if static and n == 1:  # the step itself, as _step runs it
             head, body, tail = self._parts
 
+        def from_kept(c, flows_h, x_kept):  # the kept state replaces the rebuilt one
+            return back(body, flows_h)((restart(c[0], x_kept), c[1]))
+
         def walk(carry):
             carry = back_once(tail)(carry)
-            carry = threaded(lambda c, flows_h: back(body, flows_h)(c), carry, (self.flows, h), n)
+            if kept is None:
+                carry = threaded(lambda c, flows_h: back(body, flows_h)(c), carry, (self.flows, h), n)
+            else:
+                carry = threaded(from_kept, carry, (self.flows, h), n, xs=kept, reverse=True)
             return back_once(head)(carry)
 
         carry = (pack(x_after, ct_after), zeros)
@@ -409,11 +444,18 @@ class Composition(AbstractFlow):
                          for f, (dp, _) in zip(self.flows, acc) for entry, p in zip(dp, split_parameters(f)[0])]
         return x, ct, ct_parameters, sum(jnp.sum(dt) for _, dt in acc).astype(h.dtype)
 
-    def advance(self, state, h, n):
+    def advance(self, state, h, n, keep: bool = False):
         """``n`` steps, merging the last sub-flow of each step with the first of the next.
 
-        ``n`` is a Python int (a ``lax.scan``) or a traced integer (a ``fori_loop``).
+        ``n`` is a Python int (a ``lax.scan``) or a traced integer (a ``fori_loop``). ``keep``
+        (Python int ``n`` ≥ 2, not differentiable): (state, the loop's state after each
+        step stacked), the trajectory ``retrace(..., kept=)`` restarts from.
         """
+        with self._loops():
+            return self._advance(state, h, n, keep)
+
+    def _advance(self, state, h, n, keep):
+        """The body of ``advance``."""
         h = _like_state(h, state)
         static = isinstance(n, int)
         if static and n == 0:
@@ -425,6 +467,10 @@ class Composition(AbstractFlow):
         def one(x, flows_h):
             flows, step = flows_h
             return _apply(flows, body, x, step)
+
+        if keep:
+            x, kept = threaded(one, _apply_once(self.flows, head, state, h), (self.flows, h), n, keep=True)
+            return _apply_once(self.flows, tail, x, h), kept
 
         def steps(x):
             x = _apply_once(self.flows, head, x, h)

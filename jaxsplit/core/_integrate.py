@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import _bounds
-from ._adjoints import advance, advance_checkpointed, choose_adjoint
+from ._adjoints import advance, advance_checkpointed, choose_adjoint, stored_engine
 from ._errors import InputError
 from ._flows import check_state, join_parameters, split_parameters
 from ._state import as_state, float_dtype
@@ -301,6 +301,7 @@ def integrate(step, x0, h, n_steps: int | None = None, *, save_every: int | None
     except TypeError as err:
         raise InputError(f"step must be a function or a PyTree of arrays and hashable parts: {err}") from err
     adjoint = choose_adjoint(adjoint, step, ts is not None, (parameters, x0, h, t0, ts))
+    adjoint = stored_engine(adjoint, step, (parameters, x0, h, t0))
     if ts is not None:
         if n_steps is not None or save_every is not None:
             raise InputError("give either ts= (output times) or n_steps (with save_every=), not both")

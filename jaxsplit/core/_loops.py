@@ -52,23 +52,35 @@ def plain_loops():
     return _switched_on(_PLAIN)
 
 
-def threaded(body, carry, invariants, n, one_call: bool = True):
+def threaded(body, carry, invariants, n, one_call: bool = True, keep: bool = False, xs=None, reverse: bool = False):
     """``n`` times ``carry = body(carry, invariants)``: a ``lax.scan`` (Python int ``n``) or a
     ``while_loop`` (traced ``n``), the array leaves of ``invariants`` (and a traced bound)
     carried through an optimization barrier with ``carry`` (the module docstring says why),
     the body traced with the select form on; through ``one_kernel`` unless ``plain_loops`` or
-    ``one_call`` is False (a loop nested in another's kernel)."""
+    ``one_call`` is False (a loop nested in another's kernel).
+
+    For a Python int ``n`` only: ``keep`` returns (carry, the carries after each iteration
+    stacked); ``xs`` (leading axis ``n``) gives iteration k its slice, ``body(carry, invariants,
+    x_k)``; ``reverse`` runs the iterations from the last slice to the first."""
     arrays, rest = eqx.partition(invariants, eqx.is_array)
 
-    def through(c):
+    def through(c, *x):
         state, inv = c
         with _switched_on(_SELECTS) if not _PLAIN.get() else contextlib.nullcontext():
-            state = body(state, eqx.combine(inv, rest))
+            state = body(state, eqx.combine(inv, rest), *x)
         return jax.lax.optimization_barrier((state, inv))
 
-    run = one_kernel if one_call else (lambda loop, *args: loop(*args))
+    run = one_kernel if one_call else (lambda loop, *args, kept=False: loop(*args))
     if isinstance(n, int):
-        return run(lambda c: jax.lax.scan(lambda c, _: (through(c), None), c, length=n)[0][0], (carry, arrays))
+        def scanned(c, xs):
+            def one(c, x):
+                c = through(c, *(() if xs is None else (x,)))
+                return c, (c[0] if keep else None)
+
+            c, kept = jax.lax.scan(one, c, xs, length=n, reverse=reverse)
+            return (c[0], kept) if keep else c[0]
+
+        return run(scanned, (carry, arrays), xs, kept=keep)
     # a traced count: a while loop whose bound goes through the barrier too (a fori_loop carries
     # it unchanged, and XLA then hoisted the select's tests: ts= runs 7x slower). Closed over,
     # not passed: a concrete n stays concrete (passed in, one body's reversible gradient 6 % slower)
@@ -92,20 +104,22 @@ def repeated(body, carry, invariants, n: int, remat=lambda f: f):
     (wrapped in ``remat``) closes over the invariants: carried, reverse mode would save them at
     every step."""
     arrays, rest = eqx.partition(invariants, eqx.is_array)
-    return _repeated(lambda y, inv: body(y, eqx.combine(inv, rest)), remat, carry, arrays, n)
+    return _repeated(lambda y, inv: body(y, eqx.combine(inv, rest)), remat, carry, arrays, n, _PLAIN.get())
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1, 4))
-def _repeated(body, remat, carry, arrays, n):
+# ``plain`` is ``plain_loops`` at the call, kept for the JVP rule: JAX may apply it after the
+# call has been traced (``grad`` of a ``jit``), outside that context
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1, 4, 5))
+def _repeated(body, remat, carry, arrays, n, plain):
     return threaded(body, carry, arrays, n)
 
 
 @_repeated.defjvp
-def _repeated_jvp(body, remat, n, primals, tangents):
+def _repeated_jvp(body, remat, n, plain, primals, tangents):
     def closed(carry, arrays):
         step = remat(lambda y: body(y, arrays))
         return jax.lax.scan(lambda y, _: (step(y), None), carry, length=n)[0]
 
-    if _PLAIN.get():
+    if plain or _PLAIN.get():
         return jax.jvp(closed, primals, tangents)
     return one_kernel_jvp(closed, primals, tangents)

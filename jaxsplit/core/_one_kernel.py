@@ -65,12 +65,16 @@ _REFUSED_IN_LOOP = ("transpose",)
 _DIALECTS = ("stablehlo.", "chlo.", "func.")
 
 
-def one_kernel(loop, *args):
+def one_kernel(loop, *args, kept: bool = False):
     """``loop(*args)`` (a ``lax.scan`` or ``while_loop`` of a step) as one call, tagged on the
-    CPU to compile into one kernel where that is faster (see the module docstring)."""
+    CPU to compile into one kernel where that is faster (see the module docstring). ``kept``:
+    ``loop`` returns (state, byproduct), a trajectory stacked by the loop: only the state is
+    weighed against ``ONE_KERNEL_BYTES`` (the byproduct is written, never iterated on)."""
     out = jax.jit(loop)(*args)
+    out, byproduct = out if kept else (out, None)
     leaves, tree = jax.tree_util.tree_flatten(out)
-    return jax.tree_util.tree_unflatten(tree, _one_kernel_p.bind(*leaves))
+    out = jax.tree_util.tree_unflatten(tree, _one_kernel_p.bind(*leaves))
+    return (out, byproduct) if kept else out
 
 
 def one_kernel_jvp(loop, primals, tangents):
