@@ -5,7 +5,7 @@ and Heun on small lattices; writes spins.json, spins.md and two figures into --o
 import argparse
 import time
 
-from . import _args, _io, _signals
+from . import _args
 
 EXAMPLES = """examples:
   jaxsplit spins-audit --out spins                  # 3 lattices x 5 methods: ~12 min on 2 shared cores
@@ -34,16 +34,9 @@ def add_parser(sub):
 def run(args):
     from ..paper import _spins
 
-    _spins.check_names(args.cases, args.methods)  # refused before any work
     start = time.perf_counter()
-    with _io.Outputs(force=args.force) as outputs:
-        out = outputs.directory(args.out, "--out directory")
-        for name in _spins.output_names(not args.no_figures):
-            outputs.file(out / name, "audit")
-        records, files = _spins.run_spins_audit(args.cases, args.methods, figures=not args.no_figures)
-        with _signals.current().critical():
-            for name, data in files.items():  # spins.json last
-                outputs.write_bytes(out / name, data)
+    records, out = _spins.audit_spins(args.out, args.cases, args.methods, figures=not args.no_figures,
+                                      force=args.force)
     for r in records:
         print(f"{r['case']:<14} {r['method']:<19} {r['poisson']['verdict']:<18} {r['energy']['verdict']}")
     print(f"{len(records)} runs in {time.perf_counter() - start:.1f} s -> {out / 'spins.json'}, {out / 'spins.md'}")

@@ -33,7 +33,6 @@ from ..lattices import lattice
 from ..systems._spin_integrators import heun, spherical_midpoint
 from ..systems._spin_lattice import spin_lattice
 from ..systems._splitting import splitting
-from ._output import check_out_dir, write_outputs
 from ._records import ROUND_OFF, STRUCTURE_FLOOR
 
 # name -> (lattice name, size, periodic, couplings): N <= 16, three geometries, all terms
@@ -202,11 +201,21 @@ def output_names(figures: bool = True) -> tuple[str, ...]:
 
 
 def audit_spins(out_dir, cases=None, methods=None, *, figures: bool = True, force: bool = False) -> list[dict]:
-    """Run the audit and write ``out_dir/spins.json``, ``spins.md`` and the figures; the records."""
-    out_dir = check_out_dir(out_dir, force)
-    records, files = run_spins_audit(cases, methods, figures=figures)
-    write_outputs(out_dir, files)
-    return records
+    """Run the audit and write ``out_dir/spins.json``, ``spins.md`` and the figures through the
+    command line's one writer (``cli._io.Outputs``: ``--force`` and the names checked before
+    any work, atomic writes, the directory locked); the records and the directory written."""
+    from ..cli import _io, _signals
+
+    check_names(cases, methods)  # refused before any work
+    with _io.Outputs(force=force) as outputs:
+        out = outputs.directory(out_dir, "--out directory")
+        for name in output_names(figures):
+            outputs.file(out / name, "audit")
+        records, files = run_spins_audit(cases, methods, figures=figures)
+        with _signals.current().critical():
+            for name, data in files.items():  # spins.json last
+                outputs.write_bytes(out / name, data)
+    return records, out
 
 
 def _g(x, digits=2):
