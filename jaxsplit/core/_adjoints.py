@@ -1,10 +1,15 @@
 """How ``n`` steps are advanced, and what reverse mode stores: the three adjoints.
 
-* ``"store"`` (default): a ``lax.scan``; reverse mode keeps every step's state, memory
-  O(n), the fastest gradient while it fits. A ``Composition`` rematerialises its step from
-  the stored state (``jax.checkpoint`` per step): stacking every intermediate instead made
-  XLA re-evaluate the step once per stacked residual (free body: 90× the forward run, now
-  2.5×; ``benchmarks/results/gradients.md``). Other steps keep their residuals.
+* ``"store"`` (default): memory O(n), one state per step. Under reverse mode (``grad``,
+  ``vjp``; seen at the call, also through a ``vmap`` inside the differentiated function) a
+  Composition of reversible flows keeps every step's state and walks each step back from it
+  with the flows' fused ``step_back`` (``advance_stored_retraced``: the reversible adjoint's
+  pass restarted at each kept state, so no round-off is carried between steps): gradients
+  2-3x the forward run (``benchmarks/results/gradients.md``). Otherwise (other steps,
+  forward mode, a ``grad`` outside a ``jit`` of the user's, where the call sees no reverse
+  mode) the differentiated ``lax.scan``, which rematerialises its step from the stored state
+  (``jax.checkpoint`` per step: stacking every intermediate instead made XLA re-evaluate the
+  step once per stacked residual).
 * ``"checkpoint"``: blocks of B = ⌈√n⌉ steps under ``jax.checkpoint``; reverse mode stores one
   state per block and recomputes a block at a time: memory O(n/B + B) = O(√n), about one
   extra forward run of cost.
