@@ -128,13 +128,26 @@ def _operations(op, in_loop: bool = False):
                 yield from _operations(inner, in_loop or inner.operation.name == "stablehlo.while")
 
 
+def _moves_no_data(op) -> bool:
+    """A transpose that only moves axes of length 1 (a reshape: what ``vmap`` puts in a loop
+    over one state of several parts)."""
+    try:
+        shape = mlir.ir.RankedTensorType(op.operands[0].type).shape
+        permutation = list(mlir.ir.DenseI64ArrayAttr(op.attributes["permutation"]))
+    except Exception:  # noqa: BLE001 -- not the op this reads: refused
+        return False
+    kept = [axis for axis in permutation if shape[axis] != 1]
+    return kept == sorted(kept)
+
+
 def _compilable(function, symbols, seen, in_loop: bool = False) -> bool:
     """Every operation reachable from ``function`` (through calls) is one the one-kernel
     emitter compiles (``_REFUSED``; ``_REFUSED_IN_LOOP`` only where a loop iterates it)."""
     for op, looped in _operations(function, in_loop):
         name = op.operation.name
         short = name.split(".", 1)[1] if "." in name else name
-        if not name.startswith(_DIALECTS) or short in _REFUSED or (looped and short in _REFUSED_IN_LOOP):
+        if not name.startswith(_DIALECTS) or short in _REFUSED or (
+                looped and short in _REFUSED_IN_LOOP and not _moves_no_data(op)):
             return False
         if name == "func.call":
             callee = mlir.ir.FlatSymbolRefAttr(op.attributes["callee"]).value
