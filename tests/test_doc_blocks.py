@@ -84,7 +84,7 @@ def run_blocks(document_blocks: list[Block], capsys) -> list[str]:
         if block.lang == "python":
             exec(compile(source, block.where, "exec"), namespace)  # noqa: S102  (the documentation's own code)
         elif block.lang == "bash":
-            for line in source.splitlines():
+            for line in source.replace("\\\n", " ").splitlines():  # a shell line continued with a backslash
                 argv = jaxsplit_argv(line, block.where)
                 if argv is None:
                     continue
