@@ -224,7 +224,7 @@ def _joint_layout(state, cotangent):
     one state: the same time, other fusion, so round-off differs)."""
     leaves, treedef = jax.tree_util.tree_flatten(state)
     if len({(jnp.shape(leaf), jnp.result_type(leaf)) for leaf in leaves + jax.tree_util.tree_leaves(cotangent)}) != 1:
-        return (lambda x, ct: (x, ct)), (lambda joint: joint), (lambda joint, x: (x, joint[1]))
+        return (lambda x, ct: (x, ct)), (lambda joint: joint)
     size = len(leaves)
 
     def pack(x, ct):
@@ -233,10 +233,7 @@ def _joint_layout(state, cotangent):
     def unpack(joint):
         return tuple(jax.tree_util.tree_unflatten(treedef, list(joint[k * size:(k + 1) * size])) for k in (0, 1))
 
-    def restart(joint, x):  # the state part replaced, written in place
-        return pack(x, unpack(joint)[1]) if size == 1 else joint.at[:size].set(jnp.stack(jax.tree_util.tree_leaves(x)))
-
-    return pack, unpack, restart
+    return pack, unpack
 
 
 @functools.cache
@@ -391,7 +388,7 @@ class Composition(AbstractFlow):
         given = jax.eval_shape(lambda x, ct: [f.step_back(x, h, ct)[2:] for f in self.flows], x_after, ct_after)
         zeros = tuple(jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), g) for g in given)
 
-        pack, unpack, restart = _joint_layout(x_after, ct_after)
+        pack, unpack = _joint_layout(x_after, ct_after)
 
         def back_one(piece, weight, joint, acc, flows=self.flows, h=h):  # one sub-flow undone, cotangents added
             x, ct = unpack(joint)
@@ -424,7 +421,7 @@ class Composition(AbstractFlow):
             head, body, tail = self._parts
 
         def from_kept(c, flows_h, x_kept):  # the kept state replaces the rebuilt one
-            return back(body, flows_h)((restart(c[0], x_kept), c[1]))
+            return back(body, flows_h)((pack(x_kept, unpack(c[0])[1]), c[1]))
 
         def walk(carry):
             carry = back_once(tail)(carry)
