@@ -16,7 +16,8 @@ The loss is a weighted sum of the final state; gradients with respect to every p
 and the initial state.
 
 * memory: XLA's own account of the compiled gradient (``memory_analysis().temp_size_in_bytes``);
-* time: gradient / forward wall time (median of the per-round ratios, interleaved rounds),
+* time: gradient / forward CPU time of the process (median of the per-round ratios,
+  interleaved rounds; the wall time moved with other jobs' load on the 2 shared cores),
   the stored one also as ``jax.jit(jax.grad(jax.jit(loss)))``, where the call sees no reverse
   mode and the differentiated scan runs (the stored gradient before 04106fc);
 * agreement: max relative difference from the stored-trajectory gradient.
@@ -144,7 +145,7 @@ def time_ratios(system, n, repeats):
     cases[SCAN] = lambda: jax.block_until_ready(hidden(*args))
     cases["forward"]()
     log(f"{system}: timing at {n} steps")
-    times = interleaved(cases, repeats)
+    times = interleaved(cases, repeats, clock=time.process_time)
     out = {"system": system, "n_steps": n, "forward_s": statistics.median(times["forward"])}
     for adjoint in ADJOINTS + (SCAN,):
         out[adjoint] = statistics.median(a / f for a, f in zip(times[adjoint], times["forward"]))
@@ -270,7 +271,7 @@ def main(argv=None):
         extra = [f"{r[k]:.1e}" if k in r else "—" for k in ("largest_gradient", "checkpoint_vs_store",
                                                               "reversible_vs_store")]
         lines.append(f"| {r['system']} | {r['n_steps']:,} | " + " | ".join(mib + extra) + " |")
-    lines += ["", f"Time of one gradient / one forward run (median of {repeats} interleaved rounds):", "",
+    lines += ["", f"CPU time of one gradient / one forward run (median of {repeats} interleaved rounds):", "",
               ("| system | steps | forward | store | checkpoint | reversible | store, `grad(jit(loss))` (the "
                "differentiated scan) |"), "|---|---|---|---|---|---|---|"]
     for r in ratios:
