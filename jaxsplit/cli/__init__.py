@@ -84,6 +84,10 @@ def main(argv=None) -> int:
     at any moment before the process is gone makes its status 130)."""
     with _signals.policy() as stop:
         status = _run(argv, stop)
+        if status != _signals.EXIT_INTERRUPTED:
+            from ..distributed import leave
+
+            leave()  # several processes: wait for the others before ending (see leave)
         if argv is None:
             _signals.end_process(status, stop)
     return status
@@ -97,6 +101,9 @@ def _run(argv, stop) -> int:
 
     jax.config.update("jax_enable_x64", True)
     try:
+        from ..distributed import initialize_from_env
+
+        initialize_from_env()  # one of several processes (python -m jaxsplit.launch): join them
         parser = build_parser()
         args = parser.parse_args(argv)
         if args.command is None:

@@ -163,10 +163,9 @@ _CHECKS: dict = {}  # id(step) -> (weak reference, its checks): forgotten with t
 def check_state(step, x):
     """``x`` refused where ``step`` (a flow) declares it cannot integrate it (``check_state``);
     a plain function declares nothing. Called through the class: cheap for a remembered step.
-    A state spread over several processes (a global array that this process cannot read whole)
-    is not fetched: each process would see only its own shards."""
-    if isinstance(step, AbstractFlow) and all(isinstance(leaf, jax.core.Tracer) or getattr(leaf, "is_fully_addressable", True)
-                                              for leaf in jax.tree_util.tree_leaves(x)):
+    A state spread over several processes (a global array) is checked in each process on the
+    part it holds (the checks read values through ``_state.host_values``)."""
+    if isinstance(step, AbstractFlow):
         type(step).check_state(step, x)
     return x
 

@@ -1,5 +1,9 @@
 """States are any PyTree: the floating leaves evolve, integer leaves ride along untouched.
 
+``host_values`` is the one way the library looks at a state's or a parameter's values on the
+host (validation, choices that shape the compiled program): it also reads a global array
+spread over several processes (``jax.distributed``), where ``np.asarray`` would refuse.
+
 ``float_dtype`` is the dtype a computation on a state follows (the step size is cast to
 it, never the state to the step size). ``ravel`` flattens the floating leaves into one
 vector, the coordinates in which the structure checks take Jacobians and a system's
@@ -22,6 +26,49 @@ def float_dtype(state):
     """The common dtype of the floating leaves (the default float when there are none)."""
     leaves = [leaf for leaf in jax.tree_util.tree_leaves(state) if is_floating(leaf)]
     return jnp.result_type(*leaves) if leaves else jnp.result_type(float)
+
+
+def host_values(x, whole: bool = False, where: bool = False):
+    """The values of ``x`` this process may look at, as NumPy; ``None`` when ``x`` is traced.
+
+    An ordinary array (or one replicated on every device) is read whole. A global array
+    spread over several processes gives what this process holds: its addressable shards
+    assembled into the block of the global array they cover, so checks of entries (finite,
+    positive, of unit length) run in each process on its own part, with no communication.
+    ``whole=True`` gathers the whole array from every process instead: a collective, which
+    every process must reach (they all run the same program); for values that decide the
+    compiled program (which terms exist, a split's pieces), which must be the same everywhere.
+    ``where=True`` also returns the block's slices into the global array (``...`` when whole).
+    """
+    if isinstance(x, jax.core.Tracer):
+        return (None, None) if where else None
+    if not isinstance(x, jax.Array) or x.is_fully_addressable or x.is_fully_replicated:
+        values = np.asarray(x)
+        return (values, ...) if where else values
+    box = None if whole else _addressable_block(x)
+    if box is None:  # gathered (asked for, or the shards held here do not tile one block)
+        from jax.experimental import multihost_utils
+
+        values = np.asarray(multihost_utils.process_allgather(x, tiled=True))
+        return (values, ...) if where else values
+    return box if where else box[0]
+
+
+def _addressable_block(x):
+    """(values, slices) of the block of ``x`` its addressable shards tile; None if they do not."""
+    blocks = {}
+    for shard in x.addressable_shards:
+        bounds = tuple(index.indices(n)[:2] for index, n in zip(shard.index, x.shape))
+        blocks.setdefault(bounds, shard.data)  # replicas of one block: read once
+    low = [min(b[a][0] for b in blocks) for a in range(x.ndim)]
+    high = [max(b[a][1] for b in blocks) for a in range(x.ndim)]
+    shape = tuple(h - lo for lo, h in zip(low, high))
+    if sum(int(np.prod([h - lo for lo, h in b])) for b in blocks) != int(np.prod(shape)):
+        return None
+    values = np.empty(shape, x.dtype)
+    for bounds, data in blocks.items():
+        values[tuple(slice(lo - o, h - o) for (lo, h), o in zip(bounds, low))] = np.asarray(data)
+    return values, tuple(slice(lo, h) for lo, h in zip(low, high))
 
 
 def as_state(x0, name: str = "x0"):

@@ -57,6 +57,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..core._errors import InputError
+from ..core._state import host_values
 from ._attitude import Attitude
 from ._elliptic import incomplete_pi, jacobi_reduced, legendre_integrals, safe_sqrt
 from ._rigid_body import RigidBody, as_float_array, check_inertia, is_concrete
@@ -217,7 +218,7 @@ def exact_solution(body, x0, t):
     if attitude:
         Attitude(inertia, allow_nonphysical=True).check_state((m0, q0))  # inertia checked above
     t = jnp.asarray(t, dtype=m0.dtype)
-    if is_concrete(t) and not np.all(np.isfinite(np.asarray(t))):
+    if is_concrete(t) and not np.all(np.isfinite(host_values(t))):
         raise InputError("t must be finite times")
     inertia = jnp.asarray(inertia, m0.dtype)
     if attitude:

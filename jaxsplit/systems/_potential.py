@@ -31,7 +31,7 @@ import numpy as np
 
 from ..core._errors import InputError
 from ..core._flows import AbstractKick
-from ..core._state import fits_batch
+from ..core._state import fits_batch, host_values
 from ._base import AbstractSystem
 from ._rigid_body import is_concrete
 from ._spin import Commuting, MomentumSpin
@@ -99,8 +99,8 @@ class BodyInPotential(AbstractSystem):
         from a long run passes). Returns ``x``."""
         _, gamma = BodyInPotential._parts(self, x)
         check_finite_state(x, f"the state of {type(self).__name__}")
-        if is_concrete(gamma):
-            g = np.asarray(gamma)
+        g = host_values(gamma)
+        if g is not None:
             check_unit(np.sqrt(np.einsum("...i,...i->...", g, g)), "Γ must be a unit vector", "|Γ|", g.dtype)
         return x
 
@@ -147,7 +147,7 @@ class BodyInPotential(AbstractSystem):
         """Two pieces for I_0 = I_1: the exact kinetic flow (rotation about axis 2 and spin about
         m) and the potential kick."""
         if is_concrete(self.inertia):
-            i = np.asarray(self.inertia)
+            i = host_values(self.inertia, whole=True)  # it decides the split: the same everywhere
             if not np.allclose(i[..., 0], i[..., 1], rtol=1e-12, atol=0):
                 raise InputError(f"split 'symmetric' needs I1 = I2 (the kinetic flow is exact only for a symmetric "
                                  f"body, axis 3 its symmetry axis), got inertia {i.tolist()}")

@@ -28,6 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..core._errors import InputError
+from ..core._state import host_values
 from ._base import AbstractSystem
 from .so3 import AxisRotation, check_shape, hat
 
@@ -102,7 +103,7 @@ def check_inertia(inertia, name: str = "inertia", allow_nonphysical: bool | None
     if inertia.ndim < 1 or inertia.shape[-1] != 3:
         raise InputError(f"{name} must have 3 components (I1, I2, I3), got shape {tuple(inertia.shape)}")
     if is_concrete(inertia):
-        check_moments(np.asarray(inertia), name, allow_nonphysical)
+        check_moments(host_values(inertia), name, allow_nonphysical)
     return inertia
 
 
@@ -114,7 +115,7 @@ def shift_axis(inertia, shift="auto") -> int:
             raise InputError("shift='auto' needs concrete inertia; inside jit/vmap/grad pass shift=0, 1 or 2")
         if np.ndim(inertia) != 1:
             raise InputError("shift='auto' needs a single body; for a batch pass shift=0, 1 or 2")
-        return middle_axis(1 / np.asarray(inertia))
+        return middle_axis(1 / host_values(inertia, whole=True))  # it decides the split: the same everywhere
     if isinstance(shift, (bool, np.bool_)) or shift not in (0, 1, 2):
         raise InputError(f"shift must be 0, 1, 2 (the axis, counted from 0) or 'auto', got {shift!r}")
     return int(shift)
@@ -185,7 +186,7 @@ class RigidBody(AbstractSystem):
 
     def is_physical(self) -> bool:
         """Triangle inequalities I_i + I_j >= I_k (concrete inertia only)."""
-        i1, i2, i3 = np.moveaxis(np.asarray(self.inertia), -1, 0)
+        i1, i2, i3 = np.moveaxis(host_values(self.inertia, whole=True), -1, 0)
         return bool(np.all((i1 + i2 >= i3) & (i2 + i3 >= i1) & (i3 + i1 >= i2)))
 
     def max_rate(self, m0):

@@ -47,6 +47,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..core._errors import InputError
+from ..core._state import host_values
 from ..lattices._graph import Lattice
 from ._base import AbstractSystem
 from ._rigid_body import as_float_array, is_concrete
@@ -56,6 +57,7 @@ from ._spin_flows import (
     FrozenField,
     SiteRotation,
     StaticIndex,
+    _site_axes,
     as_sites,
     partners,
     per_site,
@@ -70,11 +72,11 @@ def _per(value, count: int, name: str, what: str, vector: bool = False):
     """A finite scalar (or 3-vector) or one per bond/site: checked where concrete."""
     arr = as_float_array(value, name)
     if is_concrete(arr):
-        a = np.asarray(arr)
+        a = host_values(arr)
         tail = (3,) if vector else ()
-        if a.shape not in (tail, (count,) + tail):
+        if arr.shape not in (tail, (count,) + tail):
             one = "a 3-vector" if vector else "a number"
-            raise InputError(f"{name} must be {one} or one per {what} (shape {(count,) + tail}), got shape {a.shape}")
+            raise InputError(f"{name} must be {one} or one per {what} (shape {(count,) + tail}), got shape {arr.shape}")
         if not np.all(np.isfinite(a)):
             raise InputError(f"{name} must be finite, got {_show(a[~np.isfinite(a)])}")
     return arr
@@ -82,7 +84,7 @@ def _per(value, count: int, name: str, what: str, vector: bool = False):
 
 def _present(value) -> bool:
     """Whether a term is there: any nonzero entry (a traced value counts as present)."""
-    return value is not None and (not is_concrete(value) or bool(np.any(np.asarray(value) != 0)))
+    return value is not None and (not is_concrete(value) or bool(np.any(host_values(value, whole=True) != 0)))
 
 
 def _pick(value, index, vector: bool = False):
@@ -159,13 +161,14 @@ class SpinLattice(AbstractSystem):
         self.anisotropy = _per(anisotropy, n, "anisotropy", "site")
         axis = _per(axis, n, "axis", "site", vector=True)
         size = jnp.linalg.norm(axis, axis=-1, keepdims=True)
-        if is_concrete(size) and np.any(np.asarray(size) == 0):
+        if is_concrete(size) and np.any(host_values(size) == 0):
             raise InputError("axis (the anisotropy axis n) must be a nonzero vector, got (0, 0, 0)")
         self.axis = axis / size
         self.field = _per(field, n, "field", "site", vector=True)
         self.spin_length = _per(spin_length, n, "spin_length", "site")
-        if is_concrete(self.spin_length) and not np.all(np.asarray(self.spin_length) > 0):
-            raise InputError(f"spin_length must be > 0, got {_show(np.asarray(self.spin_length))}")
+        lengths = host_values(self.spin_length)
+        if lengths is not None and not np.all(lengths > 0):
+            raise InputError(f"spin_length must be > 0, got {_show(lengths)}")
 
     # ------------------------------------------------------------------ structure
     @property
@@ -238,11 +241,11 @@ class SpinLattice(AbstractSystem):
         if _present(self.anisotropic):
             directions.append(np.array([0.0, 0.0, 1.0]))
         if _present(self.dm):
-            directions += list(np.asarray(self.dm).reshape(-1, 3))
+            directions += list(host_values(self.dm, whole=True).reshape(-1, 3))
         if _present(self.field):
-            directions += list(np.asarray(self.field).reshape(-1, 3))
-        k = np.broadcast_to(np.asarray(self.anisotropy), (self.n_sites,))
-        n = np.broadcast_to(np.asarray(self.axis), (self.n_sites, 3))
+            directions += list(host_values(self.field, whole=True).reshape(-1, 3))
+        k = np.broadcast_to(host_values(self.anisotropy, whole=True), (self.n_sites,))
+        n = np.broadcast_to(host_values(self.axis, whole=True), (self.n_sites, 3))
         directions += list(n[k != 0])
         directions = [d / np.linalg.norm(d) for d in directions if np.linalg.norm(d) > 0]
         if not directions:
@@ -272,12 +275,19 @@ class SpinLattice(AbstractSystem):
         x = jnp.asarray(x)
         if not jnp.issubdtype(x.dtype, jnp.floating):
             raise InputError(f"a spin state must be float32 or float64, got {x.dtype}")
-        s = self.sites(x)
-        if is_concrete(s):
-            a = np.asarray(s)
+        try:
+            k = _site_axes(x.shape, self.n_sites)
+        except ValueError:
+            return self.sites(x)  # its message names the shapes allowed
+        a, where = host_values(x, where=True)  # spread over processes: the block held here
+        if a is not None:
             if not np.all(np.isfinite(a)):
                 raise InputError("a spin state must be finite")
-            ratio = np.linalg.norm(a, axis=-1) / np.asarray(self.spin_length)
+            # the sites' own lengths, laid out as x and cut as the block (a global spin_length whole)
+            sites = np.arange(self.n_sites).reshape(x.shape[x.ndim - 1 - k:-1])
+            lengths = np.broadcast_to(host_values(self.spin_length, whole=True), (self.n_sites,))[sites]
+            lengths = np.broadcast_to(lengths, x.shape[:-1])[... if where is ... else where[:-1]]
+            ratio = np.linalg.norm(a, axis=-1) / lengths
             tol = float(np.sqrt(np.finfo(a.dtype).eps))
             if np.any(np.abs(ratio - 1) > tol):
                 raise InputError(f"|S_i| must equal spin_length (to {tol:.1e} relative), got |S_i|/s_i = "
@@ -392,7 +402,7 @@ class SpinLattice(AbstractSystem):
             raise InputError(f"split 'sweep' composes one flow per site: at most {SWEEP_MAX_SITES} sites, got "
                              f"{self.n_sites}; use 'bonds' (exact) or 'sublattice'")
         k = self.anisotropy
-        free = [True] * self.n_sites if not is_concrete(k) else np.broadcast_to(np.asarray(k) == 0, (self.n_sites,))
+        free = [True] * self.n_sites if not is_concrete(k) else np.broadcast_to(host_values(k, whole=True) == 0, (self.n_sites,))
         if not is_concrete(k):
             free = [False] * self.n_sites
         return tuple(FrozenField(self.hamiltonian, self._mask([i]), bool(free[i]), self.n_sites)

@@ -7,6 +7,7 @@ import jax
 import numpy as np
 
 from ..core._errors import InputError
+from ..core._state import host_values
 from ._rigid_body import as_float_array, is_concrete
 from .so3 import check_shape
 
@@ -17,8 +18,9 @@ def check_vector(value, name: str):
     if is_concrete(arr):
         if arr.ndim < 1 or arr.shape[-1] != 3:
             raise InputError(f"{name} must have 3 components, got shape {tuple(arr.shape)}")
-        if not np.all(np.isfinite(np.asarray(arr))):
-            raise InputError(f"{name} must be finite, got {np.asarray(arr).tolist()}")
+        values = host_values(arr)
+        if not np.all(np.isfinite(values)):
+            raise InputError(f"{name} must be finite, got {values.tolist()}")
     return arr
 
 
@@ -26,7 +28,7 @@ def check_non_negative(value, name: str):
     """A finite number (or batch) >= 0 (checked when concrete)."""
     arr = as_float_array(value, name)
     if is_concrete(arr):
-        values = np.asarray(arr)
+        values = host_values(arr)
         if not np.all(np.isfinite(values)) or not np.all(values >= 0):
             raise InputError(f"{name} must be finite and >= 0, got {values.tolist()}")
     return arr
@@ -52,8 +54,9 @@ def _show(values) -> str:
 def check_finite_state(x, label: str):
     """Every leaf of a concrete state finite."""
     for k, leaf in enumerate(jax.tree_util.tree_leaves(x)):
-        if is_concrete(leaf) and not np.all(np.isfinite(np.asarray(leaf))):
-            bad = np.asarray(leaf)[~np.isfinite(np.asarray(leaf))]
+        values = host_values(leaf)
+        if values is not None and not np.all(np.isfinite(values)):
+            bad = values[~np.isfinite(values)]
             raise InputError(f"{label} must be finite, got {_show(bad)} in part {k}")
 
 
@@ -74,7 +77,7 @@ def _values(leaf):
     """A concrete floating leaf as a NumPy array (None when traced or not floating)."""
     if not is_concrete(leaf) or not np.issubdtype(leaf.dtype if hasattr(leaf, "dtype") else np.result_type(leaf), np.floating):
         return None
-    return np.asarray(leaf)
+    return host_values(leaf)
 
 
 def check_attitude(a, quaternion: bool):
