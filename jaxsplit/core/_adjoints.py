@@ -82,8 +82,8 @@ def check_adjoint(adjoint: str, step) -> str:
         if not isinstance(step, Composition):
             raise InputError("adjoint='reversible' needs a Composition (a splitting) of reversible flows, "
                              f"got {type(step).__name__}: use adjoint='checkpoint'")
-        bad = [type(f).__name__ for f in step.flows if not f.is_reversible]
-        if bad:
+        if not retraceable(step):
+            bad = [type(f).__name__ for f in step.flows if not f.is_reversible]
             raise InputError(f"adjoint='reversible' needs flows with φ_-t = φ_t⁻¹ (exact group flows, or "
                              f"time-symmetric compositions of them); {', '.join(bad)} is not: use adjoint='checkpoint'")
     return adjoint
@@ -148,14 +148,18 @@ _reversible.defvjp(_reversible_fwd, _reversible_bwd)
 STORE_RETRACED = "store, retraced"
 
 
+def retraceable(step) -> bool:
+    """Whether ``Composition.retrace`` can walk ``step`` back: a Composition of reversible flows."""
+    return isinstance(step, Composition) and all(f.is_reversible for f in step.flows)
+
+
 def stored_engine(adjoint: str, step, inputs) -> str:
     """How ``"store"`` runs: under reverse mode, for a Composition of reversible flows,
     ``STORE_RETRACED`` (``advance_stored_retraced``: its gradient 2-3x the forward run, not
     3.5-10x); else as given. Seen at the call, before ``integrate``'s own jit: a reverse-mode
     transformation outside a jit of the user's (``grad(jit(f))``) is not seen, and the
     differentiated scan runs (the same gradient to round-off)."""
-    if (adjoint == "store" and isinstance(step, Composition) and all(f.is_reversible for f in step.flows)
-            and reverse_mode(inputs)):
+    if adjoint == "store" and retraceable(step) and reverse_mode(inputs):
         return STORE_RETRACED
     return adjoint
 

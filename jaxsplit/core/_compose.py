@@ -330,7 +330,7 @@ class Composition(AbstractFlow):
         steps then returns it unchanged, and such a loop runs as plain loops, not one kernel
         (inside another loop, a user's ``lax.scan`` or a checkpointed block, XLA's one-kernel
         emitter aborted the process on it: "All or none of the slices should have an
-        explicit index"; ``tests/test_one_kernel.py``)."""
+        explicit index"; ``tests/test_adjoints.py``)."""
         parts = [getattr(f, "parts", None) for f in self.flows]
         if any(p is None for p in parts):
             return False
