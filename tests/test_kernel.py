@@ -25,7 +25,8 @@ M0 = jnp.asarray(jaxsplit.STANDARD_CASE.m0)
 
 
 def _errors(phi, dtype):
-    c, s = (np.asarray(a, np.float64) for a in jax.jit(so3.half_turn)(jnp.asarray(phi, dtype)))
+    # a fresh function: jit's cache would keep a kernel traced under another ``assuming``
+    c, s = (np.asarray(a, np.float64) for a in jax.jit(lambda p: so3.half_turn(p))(jnp.asarray(phi, dtype)))
     exact = np.asarray(jnp.asarray(phi, dtype), np.float64)
     cos, sin = np.cos(exact), np.sin(exact)
     sign = np.sign(c * cos + s * sin)  # one sign for both: rotations use 2sc and 2s² only
@@ -182,3 +183,75 @@ def test_the_select_form_is_traced_only_inside_jaxsplits_loops():
     tangent = jax.jvp(looped, args, (jnp.ones(2), jnp.asarray(1.0), jnp.asarray(0.0)))[1]
     np.testing.assert_allclose(tangent, jax.jvp(plain, args, (jnp.ones(2), jnp.asarray(1.0), jnp.asarray(0.0)))[1],
                                rtol=ROUNDOFF)
+
+
+# ------------------------------------------------------------ the kernel chosen inside the program
+@pytest.mark.parametrize("dtype", [jnp.float64, jnp.float32])
+def test_the_short_kernels_are_accurate_to_round_off_within_their_bounds(dtype):
+    """Each of ``SHORT_LIMITS``'s polynomials (no reduction) meets the general kernel's accuracy
+    on |φ| <= its bound, and has fewer terms than the general kernel."""
+    from jaxsplit.core._angles import SHORT_LIMITS, assuming
+
+    general = sum(map(len, so3._kernel_constants(np.dtype(dtype).name)[3:]))
+    for limit in SHORT_LIMITS:
+        phi = np.random.default_rng(2).uniform(-float(limit), float(limit), 100_001)
+        phi[:3] = [float(limit), -float(limit), 0.0]
+        with assuming(limit):
+            cos_err, sin_err, unit, signs = _errors(phi, dtype)
+        assert signs == {1.0} and cos_err <= KERNEL_ULPS and sin_err <= KERNEL_ULPS and unit <= UNIT_CIRCLE_ULPS
+        assert sum(map(len, so3._short_polynomials(np.dtype(dtype).name, limit))) < general
+
+
+def _kernel_of_run(step, x, h):
+    """The kernel ``by_angle_bound`` picks for a run of ``step`` from ``x`` with step ``h``:
+    the bound it traced the chosen branch under (0: the general kernel)."""
+    from jaxsplit.core._angles import by_angle_bound, short_angles
+
+    return by_angle_bound(step, x, h, lambda: jnp.asarray(float(short_angles() or 0)))
+
+
+def test_a_run_picks_its_kernel_inside_the_program_from_its_largest_angle():
+    """The tier follows the largest half angle |rate|·|m|·|weight|·|h|/2, with h traced (under
+    jit and under vmap, where it is one choice for the whole batch), and NaN takes the general
+    kernel. Flows that bound no angle (a heavy top's kick) always run the general one."""
+    from jaxsplit.core._angles import SHORT_LIMITS
+
+    step = jaxsplit.splitting(STANDARD, "kahan-li-8", "casimir")
+    unit = float(step.turn_rate(M0)) / 2  # half angle per unit h
+    choose = jax.jit(lambda x, h: _kernel_of_run(step, x, h))
+    for limit in SHORT_LIMITS:
+        assert float(choose(M0, 0.99 * float(limit) / unit)) == float(limit)
+    assert float(choose(M0, 1.01 * float(SHORT_LIMITS[0]) / unit)) == float(SHORT_LIMITS[1])
+    assert float(choose(M0, 1.01 * float(SHORT_LIMITS[-1]) / unit)) == 0.0
+    assert float(choose(M0, jnp.nan)) == 0.0 and float(choose(M0 * jnp.inf, 0.1)) == 0.0
+    # one body with a large |m| in a batch moves the whole batch to the general kernel
+    small_h = 0.5 * float(SHORT_LIMITS[0]) / unit
+    batch = jnp.stack([M0, M0 * 100.0])
+    assert float(jax.jit(jax.vmap(choose, (0, None)))(batch[:1], small_h)[0]) == float(SHORT_LIMITS[0])
+    assert set(np.asarray(jax.jit(jax.vmap(choose, (0, None)))(batch, small_h)).tolist()) == {0.0}
+    heavy = jaxsplit.splitting(jaxsplit.heavy_top(jnp.array([2.0, 1.6, 1.0]), jnp.array([0.0, 0.0, 0.4]), 1.3),
+                               "strang")
+    assert float(_kernel_of_run(heavy, (M0, jnp.array([0.1, 0.2, 0.97])), 1e-3)) == 0.0
+
+
+def test_every_kernel_gives_the_general_kernels_run_to_round_off():
+    """The same run with each tier's kernel and with the general one alone (no short tier): the
+    trajectories agree to round-off, and under vmap the choice is a branch (a ``case``), not a
+    select that would run every loop."""
+    import jaxsplit.core._angles as angles
+
+    step = jaxsplit.splitting(STANDARD, "kahan-li-8", "casimir")
+    unit = float(step.turn_rate(M0)) / 2
+    states = jnp.stack([M0, M0 * 0.9, M0[::-1]])
+    run = lambda x, h: jaxsplit.integrate(step, x, h, 40).final
+    for h in (0.5 * float(angles.SHORT_LIMITS[0]) / unit, 0.5 * float(angles.SHORT_LIMITS[1]) / unit):
+        tiered = jax.jit(run)(states, h)
+        saved = angles.SHORT_LIMITS
+        try:
+            angles.SHORT_LIMITS = ()
+            general = jax.jit(lambda x, h: jaxsplit.integrate(step, x, h, 40).final)(states, h)
+        finally:
+            angles.SHORT_LIMITS = saved
+        assert float(jnp.max(jnp.abs(tiered - general))) <= ROUNDOFF, h
+    lowered = jax.jit(jax.vmap(run, (0, None))).lower(states, 0.1).as_text()
+    assert "stablehlo.case" in lowered

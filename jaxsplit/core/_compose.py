@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._angles import by_angle_bound
 from ._errors import InputError
 from ._flows import AbstractFlow, as_flow, split_parameters, sum_to_shape
 from ._loops import plain_loops, repeated, threaded
@@ -339,6 +340,14 @@ class Composition(AbstractFlow):
     def _loops(self):
         return plain_loops() if self.keeps_a_part else contextlib.nullcontext()
 
+    def turn_rate(self, x):
+        """The flows' bounds, each scaled by the largest weight it is called with (``reach``):
+        a bound per unit step size; None unless every flow declares one."""
+        rates = [f.turn_rate(x) for f in self.flows]
+        if any(r is None for r in rates):
+            return None
+        return jnp.max(jnp.stack([r * w for r, w in zip(rates, self.reach())]))
+
     def entries(self) -> Word:
         """Every (piece, weight) sub-flow a call or a run may evaluate (sub-steps are weight·h),
         merges across steps included."""
@@ -423,13 +432,14 @@ class Composition(AbstractFlow):
         def from_kept(c, flows_h, x_kept):  # the kept state replaces the rebuilt one
             return back(body, flows_h)((pack(x_kept, unpack(c[0])[1]), c[1]))
 
-        def walk(carry):
-            carry = back_once(tail)(carry)
+        def loop(carry):
             if kept is None:
-                carry = threaded(lambda c, flows_h: back(body, flows_h)(c), carry, (self.flows, h), n)
-            else:
-                carry = threaded(from_kept, carry, (self.flows, h), n, xs=kept, reverse=True)
-            return back_once(head)(carry)
+                return threaded(lambda c, flows_h: back(body, flows_h)(c), carry, (self.flows, h), n)
+            return threaded(from_kept, carry, (self.flows, h), n, xs=kept, reverse=True)
+
+        def walk(carry):  # the loop's kernel chosen as ``advance`` chose it (|m| is kept)
+            carry = back_once(tail)(carry)
+            return back_once(head)(by_angle_bound(self, x_after, h, loop, carry))
 
         carry = (pack(x_after, ct_after), zeros)
         if static:
@@ -465,14 +475,20 @@ class Composition(AbstractFlow):
             flows, step = flows_h
             return _apply(flows, body, x, step)
 
+        # the loop's kernel is chosen from the initial state (``by_angle_bound``; the bound holds
+        # for the whole run); the head and tail, run once, keep the general one (one copy of them
+        # to compile)
         if keep:
-            x, kept = threaded(one, _apply_once(self.flows, head, state, h), (self.flows, h), n, keep=True)
+            x = _apply_once(self.flows, head, state, h)
+            x, kept = by_angle_bound(self, state, h, lambda y: threaded(one, y, (self.flows, h), n, keep=True), x)
             return _apply_once(self.flows, tail, x, h), kept
 
-        def steps(x):
-            x = _apply_once(self.flows, head, x, h)
-            x = repeated(one, x, (self.flows, h), n, _remat) if static else threaded(one, x, (self.flows, h), n)
-            return _apply_once(self.flows, tail, x, h)
+        def loop(x):
+            return repeated(one, x, (self.flows, h), n, _remat) if static else threaded(one, x, (self.flows, h), n)
+
+        def steps(x0):
+            x = _apply_once(self.flows, head, x0, h)
+            return _apply_once(self.flows, tail, by_angle_bound(self, x0, h, loop, x), h)
 
         if static or not head:
             return steps(state)

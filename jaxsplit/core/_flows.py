@@ -88,6 +88,13 @@ class AbstractFlow(eqx.Module):
         that must stay inside the loop's kernels: ``core._loops``). Default: no."""
         return False
 
+    def turn_rate(self, x):
+        """A bound ω (a scalar array) with |angle| <= ω·|t| for every rotation this flow evaluates
+        at every state a run from ``x`` reaches, where every flow of the run declares one (each
+        then keeps what bounds it: a rotation of m keeps |m|); None (default): no bound. It lets
+        a run pick a shorter rotation kernel inside the compiled program (``_angles``)."""
+        return None
+
     @property
     def is_reversible(self) -> bool:
         """φ_{−t} = φ_t⁻¹ exactly (a group flow, a time-symmetric composition of such flows):

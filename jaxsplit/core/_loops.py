@@ -27,6 +27,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from ._angles import assuming, short_angles
 from ._one_kernel import one_kernel, one_kernel_jvp
 
 _SELECTS = contextvars.ContextVar("jaxsplit_selects", default=False)
@@ -104,22 +105,25 @@ def repeated(body, carry, invariants, n: int, remat=lambda f: f):
     (wrapped in ``remat``) closes over the invariants: carried, reverse mode would save them at
     every step."""
     arrays, rest = eqx.partition(invariants, eqx.is_array)
-    return _repeated(lambda y, inv: body(y, eqx.combine(inv, rest)), remat, carry, arrays, n, _PLAIN.get())
+    return _repeated(lambda y, inv: body(y, eqx.combine(inv, rest)), remat, carry, arrays, n, _PLAIN.get(),
+                     short_angles())
 
 
-# ``plain`` is ``plain_loops`` at the call, kept for the JVP rule: JAX may apply it after the
-# call has been traced (``grad`` of a ``jit``), outside that context
-@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1, 4, 5))
-def _repeated(body, remat, carry, arrays, n, plain):
+# ``plain`` is ``plain_loops`` at the call and ``limit`` the kernel's ``short_angles``, kept for
+# the JVP rule: JAX may apply it after the call has been traced (``grad`` of a ``jit``, a
+# ``cond``'s branch), outside those contexts
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1, 4, 5, 6))
+def _repeated(body, remat, carry, arrays, n, plain, limit):
     return threaded(body, carry, arrays, n)
 
 
 @_repeated.defjvp
-def _repeated_jvp(body, remat, n, plain, primals, tangents):
+def _repeated_jvp(body, remat, n, plain, limit, primals, tangents):
     def closed(carry, arrays):
         step = remat(lambda y: body(y, arrays))
         return jax.lax.scan(lambda y, _: (step(y), None), carry, length=n)[0]
 
-    if plain or _PLAIN.get():
-        return jax.jvp(closed, primals, tangents)
-    return one_kernel_jvp(closed, primals, tangents)
+    with assuming(limit):
+        if plain or _PLAIN.get():
+            return jax.jvp(closed, primals, tangents)
+        return one_kernel_jvp(closed, primals, tangents)
