@@ -27,7 +27,7 @@ a given angle vector, and a copy of the state.
 
 Sharded (``--child devices``, a child process with ``--xla_force_host_platform_device_count=4``;
 ``--child processes`` under ``python -m jaxsplit.launch -n 2``): a 104 × 98 × 98 lattice
-(999,... spins; 26 planes per device so that a slab's colouring is the same on every device,
+(998,816 spins; 26 planes per device so that a slab's colouring is the same on every device,
 which the halo program needs) on one device, laid out by ``jaxsplit.distributed.shard`` over 4
 devices and partitioned by XLA (GSPMD: it all-gathers the state before each colour's partner
 gather), and by a ``shard_map`` program with explicit halo exchange (``lax.ppermute`` of one
