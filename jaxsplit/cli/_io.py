@@ -11,6 +11,11 @@ temporary file in the same directory, ``fsync``, ``os.replace`` onto the output'
 own name: a symlink there is replaced, never written through into its target) and runs
 in the signal policy's ``critical`` mode, so a file is complete or absent, never half-written. Locks
 and temporary files are removed when the command ends, also when it is abandoned.
+
+Under the launcher (``python -m jaxsplit.launch -n N -- simulate ...``) every process runs
+the whole command and only process 0 writes: in the others a claim checks the path's name and
+returns it (no lock, no test of an existing file: process 0 owns both), and a write is
+skipped (``distributed.process_index``).
 """
 
 import contextlib
@@ -24,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import distributed
 from ..core._errors import InputError
 from . import _signals
 from ._metadata import jsonable
@@ -69,6 +75,7 @@ class Outputs:
 
     def __init__(self, force: bool = False):
         self.force = force
+        self.writes = distributed.process_index() == 0  # several processes: process 0 writes
         self._files: dict[Path, str] = {}
         self._dirs: dict[Path, str] = {}
         self._locks: list[tuple[int, Path]] = []
@@ -94,6 +101,8 @@ class Outputs:
         shown = os.fspath(path)
         p = resolve(path, what)  # the file the name reaches now: compared with the other outputs
         given = Path(shown).expanduser()
+        if not self.writes:  # another process of the run: process 0 claims and writes
+            return resolve(given.parent, what) / given.name
         if os.path.isdir(p) or shown.endswith(("/", os.sep)) or given.name in ("", ".", ".."):
             raise InputError(f"{what} path {shown!r} is a directory; give a file name")
         for other, other_what in self._files.items():
@@ -122,6 +131,8 @@ class Outputs:
         lock it: the files inside it are the command's to write."""
         shown = os.fspath(path)
         p = resolve(path, what)
+        if not self.writes:
+            return p
         if resume and not os.path.isdir(p):
             raise InputError(f"nothing to resume: {what} {shown!r} does not exist; run without --resume to start")
         if os.path.exists(p) and not os.path.isdir(p):
@@ -175,7 +186,10 @@ class Outputs:
         return p
 
     def write(self, path, write) -> Path:
-        """``write(binary file)`` into a temporary file next to ``path``, then rename over it."""
+        """``write(binary file)`` into a temporary file next to ``path``, then rename over it
+        (in process 0 only: the others return the path and write nothing)."""
+        if not self.writes:
+            return Path(path)
         p = self._check_claimed(path)
         with _signals.current().critical():
             fd, tmp = tempfile.mkstemp(dir=p.parent, prefix=TEMP_PREFIX, suffix=TEMP_SUFFIX)
@@ -207,6 +221,8 @@ class Outputs:
 
     def remove_temporaries(self, directory: Path) -> None:
         """Temporary files a killed run left in a claimed directory (we hold its lock)."""
+        if not self.writes:
+            return
         for stale in Path(directory).glob(f"{TEMP_PREFIX}*{TEMP_SUFFIX}"):
             stale.unlink(missing_ok=True)
 
