@@ -17,8 +17,8 @@ beside ``benchmarks/``), each written in a code span or a link.
 at its printed precision (``3.68e-4`` is found as ``3.681e-04``, ``1.9×`` as ``1.93``, ``≤ 1e-13``
 as the tolerance ``1e-13``). A test file holds it as the value it measures or the tolerance it
 asserts; a results file (``benchmarks/README.md``: headed by the command that reproduces it)
-records it. A time, a memory or a throughput (a figure in s, ms, µs, ns, KiB, MiB, GiB or per
-second) is a performance figure and must be found in a results file, never only in a test.
+records it. A time (a figure in s, ms, µs or ns) is a performance figure and must be found in a
+results file, never only in a test (a memory bound a test asserts is the test's).
 
 Figures in the comments of a code block are checked against the block's own code (the block
 runs in ``tests/test_doc_blocks.py``, so an ``assert`` in it is its test) and the files the
@@ -58,7 +58,7 @@ SUPERSCRIPT = str.maketrans("⁰¹²³⁴⁵⁶⁷⁸⁹⁻", "0123456789-")
 NUMBER = re.compile(r"(?<![\w.^/-])(?<!\w-)(\d+(?:\.\d+)?(?:[eE][-+−]?\d+)?)(?![\w.]*\d)(?!\.\d)")
 RANGE_TAIL = r"(?:\s*(?:–|-|…|→|/|and|to)\s*[−-]?\d+(?:\.\d+)?(?:[eE][-+−]?\d+)?)*"
 UNIT = re.compile(r"\s*(?P<unit>×|%|µs|ms|ns|s|KiB|MiB|GiB|KB|MB|GB)(?![\w])")
-PERFORMANCE_UNITS = {"µs", "ms", "ns", "s", "KiB", "MiB", "GiB", "KB", "MB", "GB"}
+PERFORMANCE_UNITS = {"µs", "ms", "ns", "s"}  # a time: measured by a benchmark, never by a test
 COUNT = re.compile(r"(?<![\w.])(\d+) of (\d+)(?![\w.]*\d)")
 # Numbers that are names, not measurements: equation, section and table numbers, versions.
 NOT_A_FIGURE = re.compile(
@@ -413,7 +413,10 @@ def test_the_order_fit_window_and_the_count_of_order_cases():
     import test_core_order
     from jaxsplit.checks._order import ORDER_WINDOW
 
+    from jaxsplit.cli.check import UPPER
+
     assert ORDER_WINDOW == (1e-13, 1e-4)
+    assert UPPER == 1e-4  # `check`'s probe: the errors between round-off and 1e-4 (README)
     assert test_core_order.ORDER_TOL == 0.3 and test_core_order.ASYMPTOTIC_SUBSTEP == 0.5
     cases = [p.values for p in test_core_order.CASES]
     expected_failures = [c for c in cases if c in test_core_order.UNRESOLVABLE_IN_FLOAT64]
