@@ -56,8 +56,8 @@ SUPERSCRIPT = str.maketrans("⁰¹²³⁴⁵⁶⁷⁸⁹⁻", "0123456789-")
 # A number: digits, a decimal part, an exponent (e-13, or ·10⁵ written as a power is a setting,
 # not read); the unicode minus is a minus.
 NUMBER = re.compile(r"(?<![\w.^/-])(?<!\w-)(\d+(?:\.\d+)?(?:[eE][-+−]?\d+)?)(?![\w.]*\d)(?!\.\d)")
-RANGE_TAIL = r"(?:\s*(?:–|-|…|→|/|and|to)\s*[−-]?\d+(?:\.\d+)?(?:[eE][-+−]?\d+)?)*"
-UNIT = re.compile(r"\s*(?P<unit>×|%|µs|ms|ns|s|KiB|MiB|GiB|KB|MB|GB)(?![\w])")
+RANGE_TAIL = r"(?:\s*(?:–|-|…|→|/)\s*[−-]?\d+(?:\.\d+)?(?:[eE][-+−]?\d+)?)*"  # 1.4–1.5×, 0.85 / 0.66 s
+UNIT = re.compile(r"\s*(?P<unit>×(?!\s*\d)|%|µs|ms|ns|s|KiB|MiB|GiB|KB|MB|GB)(?![\w])")  # 4 × 4: a size
 PERFORMANCE_UNITS = {"µs", "ms", "ns", "s"}  # a time: measured by a benchmark, never by a test
 COUNT = re.compile(r"(?<![\w.])(\d+) of (\d+)(?![\w.]*\d)")
 # Numbers that are names, not measurements: equation, section and table numbers, versions.
@@ -342,32 +342,29 @@ def test_every_figure_is_found_in_a_test_or_results_file_its_text_cites(document
     assert bad == [], "\n" + "\n".join(bad)
 
 
-def test_the_checker_finds_figures_and_their_sources(tmp_path, monkeypatch):
+def test_the_checker_finds_figures_and_their_sources():
     text = ("Strang keeps it to 3.68e-4 at h = 0.1 (`tests/test_core_stepper.py`), a run costs 1.9× "
             "and takes 38 s (`results/gradients.md`); 83 of 86 orders within 0.3; Theorem 4.1 and "
-            "formula (4.3) are names, JAX 0.10.2 a version, `--dt 0.05` a command.")
+            "formula (4.3) are names, JAX 0.10.2 a version, `--dt 0.05` a command, a 4 × 4 lattice a "
+            "size; Kahan–Li 6 and 100× on Strang.")
     found = {(f.text, f.unit) for f in figures(_blank(text, CODE_SPAN))}
     assert found == {("3.68e-4", ""), ("0.1", ""), ("1.9", "×"), ("38", "s"), ("83", "of"), ("86", "of"),
-                     ("0.3", "")}, found
+                     ("0.3", ""), ("100", "×")}, found
     assert _sources(text) == ["tests/test_core_stepper.py", "benchmarks/results/gradients.md"]
     assert _printed(3.6812e-4, "3.68e-4") == _canonical("3.68e-4")
     assert _printed(0.0974, "0.1") == "0.1" and _printed(1.93, "1.9") == "1.9"
-    page = tmp_path / "page.md"
-    page.write_text("## A\n\nIt takes 38 s and errs by 2.5e-7 (`tests/test_core_order.py`).\n\n"
-                    "Uncited: 4.2e-9.\n\n| a | b |\n|---|---|\n| 7.5e-3 | x |\n")
-    monkeypatch.setattr(f"{__name__}.ROOT", tmp_path.parent if False else ROOT)
-    cs = [c for c in claims_of_text(page.read_text(), page)]
-    bad = [p for c in cs for p in problems(c)]
+    page = ("## A\n\nIt takes 38 s and errs by 2.5e-7 (`tests/test_core_order.py`).\n\n"
+            "Uncited: 4.2e-9.\n\n| a | b |\n|---|---|\n| 7.5e-3 | x |\n")
+    bad = [p for c in claims_of_text(page) for p in problems(c)]
     assert any("38 s (a performance figure" in p for p in bad), bad
     assert any("2.5e-7 (not in tests/test_core_order.py)" in p for p in bad), bad
     assert any("4.2e-9 (no test or results file" in p for p in bad), bad
     assert any("7.5e-3 (no test" in p for p in bad), bad
 
 
-def claims_of_text(text: str, where: Path) -> list[Claim]:
-    """``claims`` of a text not in the repository (the checker's own test)."""
-    fake = ROOT / "README.md"
-    return _prose_claims(_blank(text, FENCE), fake, text)
+def claims_of_text(text: str) -> list[Claim]:
+    """``claims`` of a text not in the repository (the checker's own test), as if in README.md."""
+    return _prose_claims(_blank(text, FENCE), ROOT / "README.md", text)
 
 
 # ---------------------------------------------------------------------------------------------
