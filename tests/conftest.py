@@ -48,6 +48,9 @@ def executed_notebooks(tmp_path_factory):
     return out, hooks.execute_notebooks(hooks.NOTEBOOKS, out)
 
 
+LONGEST_FIRST = {"notebooks"}  # groups handed out before all others (see below)
+
+
 @pytest.hookimpl(tryfirst=True)  # before xdist reads the groups
 def pytest_collection_modifyitems(items):
     """Whole files to one worker (``--dist loadgroup``): a file's tests share its module fixtures
@@ -56,3 +59,13 @@ def pytest_collection_modifyitems(items):
     for item in items:
         if not item.get_closest_marker("xdist_group"):
             item.add_marker(pytest.mark.xdist_group(item.path.stem))
+    # The order in which xdist hands the groups out (pyproject.toml: --no-loadscope-reorder, so it
+    # is this one): the longest chains first, so that no worker starts one while the other has
+    # nothing left (the wall time is the longest worker's). The notebook group runs the notebooks
+    # (five kernels at once) and then the site build; the rest by their number of tests, largest
+    # first (xdist's own order), every group's tests in their collected order.
+    group = {item: item.get_closest_marker("xdist_group").args[0] for item in items}
+    sizes = {}
+    for name in group.values():
+        sizes[name] = sizes.get(name, 0) + 1
+    items.sort(key=lambda item: (group[item] not in LONGEST_FIRST, -sizes[group[item]], group[item]))
