@@ -12,6 +12,21 @@ import pathlib
 TEST_XLA_FLAGS = "--xla_llvm_disable_expensive_passes=true"
 os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {TEST_XLA_FLAGS}".strip()
 
+# Tests build their steps anew (new closures, new modules), so JAX traces them again and XLA
+# compiled the same program again and again: in every worker, every CLI subprocess and notebook
+# kernel. JAX's persistent cache is keyed by the program itself, so each distinct program is
+# compiled once per run (and run, not timed: no test's assertion depends on it). One folder per
+# run, shared with the workers and subprocesses through the environment (xdist's controller
+# sets it first). JAXSPLIT_TEST_JAX_CACHE="" turns it off.
+if "JAXSPLIT_TEST_JAX_CACHE" not in os.environ:
+    import tempfile
+
+    os.environ["JAXSPLIT_TEST_JAX_CACHE"] = tempfile.mkdtemp(prefix="jaxsplit-tests-jax-cache-")
+if os.environ["JAXSPLIT_TEST_JAX_CACHE"]:
+    os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.environ["JAXSPLIT_TEST_JAX_CACHE"])
+    os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0")
+    os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES", "0")
+
 import jax  # after XLA_FLAGS: the backend reads them when it starts
 import pytest
 
