@@ -58,7 +58,7 @@ from elsewhere, or take data that move it (larger amplitude, other components).
 import dataclasses
 import math
 import time
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.flatten_util
@@ -414,10 +414,35 @@ def fit_couplings(lattice, t, observed, start: dict, *, fixed=None, classes="dir
         seconds=time.perf_counter() - begin, target=target, adjoint=adjoint)
 
 
-def spectrum(lattice, couplings: dict, x0, t, *, classes="direction", axis=(0.0, 0.0, 1.0), spin_length=1.0,
-             components: str = "xyz", window: str = "hann", scheme="strang", max_step: float = 0.05) -> Any:
+def _all_params(family, couplings):
+    return {k: jnp.asarray(_shaped(k, v, family.n_classes, "couplings"), jnp.result_type(float))
+            for k, v in couplings.items() if v is not None}
+
+
+def trajectory(lattice, couplings: dict, x0, t, *, classes="direction", axis=(0.0, 0.0, 1.0), spin_length=1.0,
+               scheme="strang", max_step: float = 0.05):
+    """States (n, N, 3) of the spin lattice with ``couplings`` (the terms of ``fit_couplings``'
+    ``start``) from ``x0`` at times ``t`` (synthetic data; the couplings are traced, so other
+    values of the same terms reuse the compiled run).
+
+    >>> import numpy as np, jaxsplit
+    >>> from jaxsplit.explore._fit_spins import trajectory
+    >>> chain = jaxsplit.lattices.lattice("chain", 8)
+    >>> trajectory(chain, {"exchange": 1.0}, jaxsplit.spin_lattice(chain).random_state(), np.arange(4) * 0.5).shape
+    (4, 8, 3)
+    """
+    from ._fit import simulate
+
+    family = SpinCouplings.build(lattice, classes, None, axis, spin_length)
+    x0 = jnp.asarray(np.asarray(x0, dtype=float).reshape(family.lattice.n_sites, 3), jnp.result_type(float))
+    return simulate(family, _all_params(family, couplings), x0, _times(t), scheme=scheme, split="bonds",
+                    max_step=max_step)
+
+
+def spectrum(lattice, couplings: dict, x0, t, *, components: str = "xyz", window: str = "hann", **kwargs):
     """S(q, ω) intensity (*size, n) of the couplings' trajectory from ``x0`` at the equally spaced
-    times ``t`` (synthetic data for ``fit_couplings(..., target="structure-factor")``).
+    times ``t`` (synthetic data for ``fit_couplings(..., target="structure-factor")``; ``kwargs``
+    as for ``trajectory``).
 
     >>> import numpy as np, jaxsplit
     >>> from jaxsplit.explore._fit_spins import spectrum
@@ -426,17 +451,58 @@ def spectrum(lattice, couplings: dict, x0, t, *, classes="direction", axis=(0.0,
     >>> spectrum(chain, {"exchange": 1.0}, x0, np.arange(32) * 0.5).shape
     (8, 32)
     """
-    family = SpinCouplings.build(lattice, classes, couplings, axis, spin_length)
     t = _times(t)
-    states = trajectory(family, x0, t, scheme=scheme, max_step=max_step)
-    return np.asarray(structure_factor(states, family.lattice, float(t[1] - t[0]), components=components,
+    states = trajectory(lattice, couplings, x0, t, **kwargs)
+    return np.asarray(structure_factor(states, lattice, float(t[1] - t[0]), components=components,
                                        window=window).intensity)
 
 
-def trajectory(family: SpinCouplings, x0, t, *, scheme="strang", max_step: float = 0.05):
-    """States (n, N, 3) of ``family({})`` (every term fixed) from ``x0`` at times ``t``."""
-    from ._fit import simulate
+def identifiability(lattice, couplings: dict, x0, t, fitted=None, *, classes="direction", axis=(0.0, 0.0, 1.0),
+                    spin_length: float = 1.0, scheme="strang", max_step: float = 0.05) -> dict:
+    """What a trajectory from ``x0`` at times ``t`` would determine, before any data: the
+    Gauss–Newton Hessian JᵀJ of the spins in the ``fitted`` terms (default: every term of
+    ``couplings``) at ``couplings``; {"eigenvalues", "labels", "undetermined", "weak"} as in
+    ``CouplingFit``.
 
-    lat = family.lattice
-    x0 = jnp.asarray(np.asarray(x0, dtype=float).reshape(lat.n_sites, 3), jnp.result_type(float))
-    return simulate(family, {}, x0, t, scheme=scheme, split="bonds", max_step=max_step)
+    >>> import jaxsplit
+    >>> from jaxsplit.explore._fit_spins import identifiability
+    >>> chain = jaxsplit.lattices.lattice("chain", 6)
+    >>> up = jaxsplit.spin_lattice(chain).uniform()                     # collinear: nothing moves
+    >>> r = identifiability(chain, {"exchange": 1.0}, up, [0.0, 0.5, 1.0])
+    >>> r["undetermined"][0]["combination"]
+    {'exchange[(1)]': 1.0}
+    """
+    from ._fit import Model, _curvature
+
+    fitted = list(couplings) if fitted is None else list(fitted)
+    held = {k: v for k, v in couplings.items() if k not in fitted}
+    family = SpinCouplings.build(lattice, classes, held, axis, spin_length)
+    params = _all_params(family, {k: couplings[k] for k in fitted})
+    t = _times(t)
+    x0 = jnp.asarray(np.asarray(x0, dtype=float).reshape(family.lattice.n_sites, 3), jnp.result_type(float))
+    from ._fit import substeps
+    from ..core._schemes import schemes
+
+    model = Model(family, schemes.resolve(scheme), "bonds", (), substeps(t, max_step), False, None)
+    data = {"x0": x0, "dts": jnp.asarray(np.diff(t)), "fixed": None,
+            "observed": jnp.zeros(len(t) * family.lattice.n_sites * 3)}
+    states = np.asarray(simulate_clean(model, params, data))
+    data["observed"] = jnp.asarray(states.reshape(-1))
+    jac, _ = _curvature(model, {"params": params, "x0": None}, data)
+    jac = np.asarray(jac)
+    evals, evecs = np.linalg.eigh(jac.T @ jac)
+    labels = _labels(params, family.names)
+    return {"eigenvalues": evals, "labels": labels,
+            "undetermined": _combinations(evals, evecs, labels, -math.inf, NULL_RATIO),
+            "weak": _combinations(evals, evecs, labels, NULL_RATIO, WEAK_RATIO)}
+
+
+def simulate_clean(model, params, data):
+    """The model's predicted spins (n, N, 3) at ``params`` (residuals against zeros)."""
+    theta = {"params": params, "x0": None}
+    return _residuals_jit(model, theta, data).reshape(len(data["dts"]) + 1, -1, 3)
+
+
+@jax.jit
+def _residuals_jit(model, theta, data):
+    return model.residuals(theta, data)
