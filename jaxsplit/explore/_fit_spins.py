@@ -251,8 +251,8 @@ class CouplingFit(NamedTuple):
     K (), B (3,)), ``couplings_std`` (Gauss–Newton), ``fixed`` (the held terms), ``classes``
     (the bond class names), ``gauge`` (the exact symmetries stated, one line each),
     ``undetermined`` and ``weak`` (combinations {parameter: coefficient} with the eigenvalue
-    ratio), ``loss``, ``noise_sigma``, ``iterations``, ``seconds``, ``target``, ``adjoint``;
-    ``as_dict()`` for JSON.
+    ratio), ``loss``, ``noise_sigma``, ``iterations``, ``seconds``, ``target``, ``adjoint``,
+    ``x0``; ``as_dict()`` for JSON.
 
     >>> import jaxsplit
     >>> jaxsplit.CouplingFit._fields[:4]
@@ -273,6 +273,7 @@ class CouplingFit(NamedTuple):
     seconds: float
     target: str
     adjoint: str
+    x0: np.ndarray  # the model's initial state (N, 3): given, the first observation, or fitted
 
     def as_dict(self) -> dict:
         def plain(v):
@@ -322,8 +323,8 @@ def _times(t):
 
 
 def fit_couplings(lattice, t, observed, start: dict, *, fixed=None, classes="direction", axis=(0.0, 0.0, 1.0),
-                  spin_length: float = 1.0, target: str = "trajectory", x0=None, components: str = "xyz",
-                  window: str = "hann", resolution: float | None = None, scheme="strang", max_step: float = 0.05,
+                  spin_length: float = 1.0, target: str = "trajectory", x0=None, fit_x0: bool = False,
+                  components: str = "xyz", window: str = "hann", resolution: float | None = None, scheme="strang", max_step: float = 0.05,
                   adjoint: str = "reversible", adam_steps: int = 0, adam_lr: float = 1e-3, lbfgs_iter: int = 100,
                   tol: float = 1e-10) -> CouplingFit:
     """Fit a spin lattice's couplings (module docstring) to ``observed`` at times ``t`` (n,).
@@ -400,7 +401,7 @@ def fit_couplings(lattice, t, observed, start: dict, *, fixed=None, classes="dir
         kwargs = {"measure": measure}
     x0 = jnp.asarray(np.asarray(x0, dtype=float).reshape(lat.n_sites, 3), dtype)
     res = fit(family, t, observed if target != "trajectory" else jnp.asarray(obs, dtype), params0, x0=x0,
-              fit_x0=False, scheme=scheme, split="bonds", max_step=max_step, adjoint=adjoint, adam_steps=adam_steps,
+              fit_x0=bool(fit_x0), scheme=scheme, split="bonds", max_step=max_step, adjoint=adjoint, adam_steps=adam_steps,
               adam_lr=adam_lr, lbfgs_iter=lbfgs_iter, tol=tol, **kwargs)
     labels = _labels(params0, family.names)
     evals, evecs = res.hessian_eigenvalues, res.null_directions
@@ -411,7 +412,7 @@ def fit_couplings(lattice, t, observed, start: dict, *, fixed=None, classes="dir
         undetermined=_combinations(evals, evecs, labels, -math.inf, NULL_RATIO),
         weak=_combinations(evals, evecs, labels, NULL_RATIO, WEAK_RATIO),
         loss=res.loss, noise_sigma=res.noise_sigma, hessian_eigenvalues=evals, iterations=res.iterations,
-        seconds=time.perf_counter() - begin, target=target, adjoint=adjoint)
+        seconds=time.perf_counter() - begin, target=target, adjoint=adjoint, x0=np.asarray(res.x0))
 
 
 def _all_params(family, couplings):
