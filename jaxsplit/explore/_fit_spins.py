@@ -7,7 +7,9 @@ The family
 bond classes and choice of fitted terms). ``params`` holds the fitted terms among
 
 * ``exchange`` J (C,) and ``anisotropic`` Δ (C,), one per bond class, ``dm`` D (C, 3);
-* ``anisotropy`` K () (shared by every site, along the fixed ``axis`` n), ``field`` B (3,);
+* ``anisotropy`` K () (shared by every site, along the fixed ``axis`` n), ``field`` B (3,),
+  or a number b for B = b n (the field along the axis: what a spectrum about an ordered
+  state along n determines well; its transverse components enter S(q, ω) only weakly);
 
 every other term is held at its ``fixed`` value. The bond classes (``bond_classes``) are
 the bond directions of a named lattice (square: x and y bonds; honeycomb: three), or one
@@ -176,20 +178,23 @@ class SpinCouplings:
             v = values.get(name)
             return default if v is None else jnp.asarray(v)[labels]
 
+        field = values.get("field", (0.0, 0.0, 0.0))
+        if jnp.ndim(field) == 0:  # a number: the field along the axis n
+            field = field * jnp.asarray(self.axis) / np.linalg.norm(self.axis)
         return SpinLattice(self.lattice, exchange=per_bond("exchange", 0.0), anisotropic=per_bond("anisotropic", 0.0),
                            dm=per_bond("dm", None), anisotropy=values.get("anisotropy", 0.0), axis=self.axis,
-                           field=values.get("field", (0.0, 0.0, 0.0)), spin_length=self.spin_length)
+                           field=field, spin_length=self.spin_length)
 
 
 def _shaped(name, value, n_classes, what):
     """A term's value as its fitted shape: (C,) per class (a scalar shared), (C, 3) for DM
-    (one vector shared), () for K, (3,) for B; finite."""
+    (one vector shared), () for K, (3,) for B (or () for a field along the axis); finite."""
     try:
         a = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
         raise InputError(f"{what} {name} must be numbers, got {value!r}") from None
     shape = {"exchange": (n_classes,), "anisotropic": (n_classes,), "dm": (n_classes, 3), "anisotropy": (),
-             "field": (3,)}[name]
+             "field": a.shape if name == "field" and a.shape == () else (3,)}[name]
     if name in PER_CLASS and a.shape in ((), (3,)) and a.shape == shape[1:]:
         a = np.broadcast_to(a, shape)
     if a.shape != shape:
@@ -486,9 +491,9 @@ def identifiability(lattice, couplings: dict, x0, t, fitted=None, *, classes="di
 
     model = Model(family, schemes.resolve(scheme), "bonds", (), substeps(t, max_step), False, None)
     data = {"x0": x0, "dts": jnp.asarray(np.diff(t)), "fixed": None,
-            "observed": jnp.zeros(len(t) * family.lattice.n_sites * 3)}
+            "observed": jnp.zeros((len(t), family.lattice.n_sites * 3))}
     states = np.asarray(simulate_clean(model, params, data))
-    data["observed"] = jnp.asarray(states.reshape(-1))
+    data["observed"] = jnp.asarray(states.reshape(len(t), -1))
     jac, _ = _curvature(model, {"params": params, "x0": None}, data)
     jac = np.asarray(jac)
     evals, evecs = np.linalg.eigh(jac.T @ jac)
