@@ -299,7 +299,8 @@ def _labels(params, names) -> list:
     for key in sorted(params):
         shape = np.shape(params[key])
         for index in np.ndindex(shape):
-            parts = [names[index[0]] if key in PER_CLASS else None, "xyz"[index[-1]] if key in ("dm", "field") else None]
+            vector = key == "dm" or (key == "field" and len(shape) == 1)
+            parts = [names[index[0]] if key in PER_CLASS else None, "xyz"[index[-1]] if vector else None]
             out.append(key + "".join(f"[{p}]" for p in parts if p is not None))
     return out
 
