@@ -139,6 +139,8 @@ def run(args):
     args.scheme = args.scheme or "kahan-li-6"
     t, states, energy, inertia1, meta = load_observations(args.data)
     written_by = meta.get("system")
+    if written_by == "spin-lattice":
+        raise InputError(f"{args.data} holds a spin-lattice run: give --system spin-lattice")
     if args.system == "auto" and written_by is not None and written_by not in MODELS:
         raise InputError(f"{args.data} holds a {written_by} run; fit models the free body and the heavy top (give "
                          "--system rigid-body to fit its m(t) as a free body's)")
