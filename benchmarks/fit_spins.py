@@ -69,7 +69,8 @@ def memory(counts, quick):
     x0 = jnp.asarray(jaxsplit.spin_lattice(lat).random_state(seed=4))
     n_obs = 10
     data = {"x0": x0, "dts": jnp.full(n_obs, 0.5), "fixed": None,
-            "observed": jnp.zeros((n_obs + 1, lat.n_sites * 3))}
+            # data away from the model (Σ|S_i|² is conserved: against zeros the gradient would be round-off)
+            "observed": jnp.asarray(np.random.default_rng(0).normal(size=(n_obs + 1, lat.n_sites * 3)))}
     rows = []
     for n_sub in counts:
         row_ = {"steps_per_observation": n_sub, "total_steps": n_sub * n_obs, "n_sites": lat.n_sites}
