@@ -142,7 +142,11 @@ def main(argv=None):
     lines += ["", f"Worst relative error {worst:.2e} (target 1e-2: {'met' if worst < 1e-2 else 'NOT met'}). "
               "Undetermined or weak combinations reported: "
               + (", ".join(f"{r['case']}: {r['undetermined'] + r['weak']}" for r in rows if r["undetermined"] + r["weak"])
-                 or "none"), ""]
+                 or "none"), "",
+              "The errors are bias from the model's step, not noise: σ (Gauss–Newton, noise only) is 3e-6 to 1e-5 for "
+              "the trajectory fits and 2e-4 / 4e-4 for the spectrum, below the errors; Strang at the model's step 0.05 "
+              "against data integrated at 0.01 shifts a frequency ω by about (ωh)²/24 (0.2 % at ω = 4.5). A smaller "
+              "max_step or a higher-order scheme lowers it.", ""]
     lines += ["Memory of the compiled gradient (XLA temporary bytes) of the square lattice's trajectory misfit, "
               f"{out['memory'][0]['n_sites']} spins, 10 observations, against the steps per observation:", "",
               "| steps per observation | total steps | reversible (MiB) | checkpoint (MiB) | gradients differ by "
