@@ -32,7 +32,12 @@ SIMULATE_ONLY = {"initial": "--initial", "amplitude": "--amplitude", "method": "
 def add_arguments(p) -> None:
     """The spin-lattice options on fit's parser: simulate's lattice and coupling options, and
     the fit's own."""
+    import argparse
+
     _spin_simulate.add_arguments(p, None)
+    for action in p._actions:  # simulate's initial state and method: parsed, refused, not advertised
+        if action.dest in SIMULATE_ONLY:
+            action.help = argparse.SUPPRESS
     g = p.add_argument_group("spin-lattice fit (--system spin-lattice)")
     g.add_argument("--fit", type=_args.names("--fit"), default=None, metavar="TERMS",
                    help=f"fitted terms among {','.join(TERMS)} (default {DEFAULT_FIT}); their options give the "
