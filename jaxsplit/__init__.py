@@ -84,6 +84,8 @@ if typing.TYPE_CHECKING:
     from .explore._fit import ParameterFit as ParameterFit
     from .explore._fit import fit as fit
     from .explore._fit import simulate as simulate
+    from .explore._fit_spins import CouplingFit as CouplingFit
+    from .explore._fit_spins import fit_couplings as fit_couplings
     from .explore._fit_inertia import FitResult as FitResult
     from .explore._fit_inertia import fit_inertia as fit_inertia
     from .explore._fit_inertia import simulate_observations as simulate_observations

@@ -31,7 +31,7 @@ import numpy as np
 from ..core._errors import InputError
 from ..explore._fit import substeps
 from ..explore._fit_inertia import fit_inertia
-from . import _args, _bounds, _data, _metadata, _signals
+from . import _args, _bounds, _data, _metadata, _signals, _spin_fit
 
 # Each Adam or L-BFGS iteration runs the model forward and backward; at 10^6 model steps per
 # evaluation a fit already takes hours on a CPU core.
@@ -51,6 +51,7 @@ EXAMPLES = """examples:
   jaxsplit fit --data obs.csv --energy 0.65 --energy-sigma 1e-3 --json
   jaxsplit fit --data obs.npz --inertia1 2.0 --scheme strang --max-step 0.02
   jaxsplit fit --data top.npz --weight 1          # heavy top (the file has gamma): inertia and centre of mass
+  jaxsplit fit --system spin-lattice --data spins.npz --fit exchange,field --exchange 0.9 --json
 data: the format `jaxsplit simulate --out` writes (.npz or .csv): t (n,) increasing times, m (n, 3)
 observed body angular momenta, gamma (n, 3) for a heavy top; optional energy (a number, or one per
 state: the first is used) and inertia1. Exit status 2 for a malformed file (one line)."""
@@ -73,10 +74,12 @@ def add_parser(sub):
     p.add_argument("--weight", type=_args.positive_float, default=None,
                    help="heavy-top: weight M g of the top (only weight x centre of mass is observable; default: "
                         "the file's metadata, else 1, assumed)")
-    p.add_argument("--scheme", default="kahan-li-6", help="integrator of the model (default kahan-li-6)")
+    p.add_argument("--scheme", default=None,
+                   help="integrator of the model (default kahan-li-6; strang for --system spin-lattice)")
     p.add_argument("--max-step", type=_args.positive_float, default=0.05, help="largest model step (default 0.05)")
     p.add_argument("--fixed-m0", action="store_true", help="take the initial state = the first observation")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    _spin_fit.add_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -130,8 +133,14 @@ MODELS = {"rigid-body": "rigid-body", "attitude": "rigid-body", "heavy-top": "he
 
 
 def run(args):
+    _spin_fit.refuse_stray(args)
+    if args.system == "spin-lattice":
+        return _spin_fit.run(args)
+    args.scheme = args.scheme or "kahan-li-6"
     t, states, energy, inertia1, meta = load_observations(args.data)
     written_by = meta.get("system")
+    if written_by == "spin-lattice":
+        raise InputError(f"{args.data} holds a spin-lattice run: give --system spin-lattice")
     if args.system == "auto" and written_by is not None and written_by not in MODELS:
         raise InputError(f"{args.data} holds a {written_by} run; fit models the free body and the heavy top (give "
                          "--system rigid-body to fit its m(t) as a free body's)")

@@ -2,15 +2,21 @@
 integrator (any system of the system layer).
 
 Model: ``family(params)`` (or ``family(params, fixed)``) is a system; from x0 the scheme on
-its split runs ⌈Δt / max_step⌉ steps per observation interval (each interval under
-``jax.checkpoint``, so reverse mode stores one state per observation); ``observe(x)``
-(default: the whole state) is compared with the data. The misfit is the mean squared
+its split runs ⌈Δt / max_step⌉ steps per observation interval; ``observe(x)`` (default: the
+whole state) is compared with the data, or ``measure(states)``, a function of the whole
+predicted trajectory (a spin lattice's S(q, ω): ``_fit_spins``). What reverse mode stores
+(``adjoint``): ``"checkpoint"`` (default) runs each interval under ``jax.checkpoint``, so it
+keeps one state per observation and, while differentiating an interval, its steps;
+``"reversible"`` runs each interval through ``integrate``'s reversible adjoint
+(``core._adjoints``), which rebuilds the interval's states by stepping back: one state per
+observation, memory flat in the steps per interval (``benchmarks/results/fit_spins.md``). The misfit is the mean squared
 residual over every observed component; Adam, then optax's L-BFGS (zoom line search)
 minimise it, compiled once per configuration and data shape. The Gauss–Newton curvature
 JᵀJ of the residuals at the optimum gives the standard deviations (σ̂² (JᵀJ)⁻¹, σ̂² = RSS /
 (N − p)) and, through its eigenvalues and null vectors, what the data cannot determine.
 """
 
+import dataclasses
 import math
 import time
 from typing import Any, NamedTuple
@@ -23,6 +29,7 @@ import numpy as np
 import optax
 
 from .._bounds import count
+from ..core._adjoints import advance, check_adjoint
 from ..core._compose import roll
 from ..core._errors import InputError
 from ..core._schemes import schemes
@@ -59,16 +66,29 @@ def substeps(t, max_step) -> int:
     return max(1, math.ceil(n))
 
 
-def predict(family, params, x0, dts, *, scheme, split=None, options=(), n_sub: int = 1, fixed=None):
-    """The states at t0 and after every interval of ``dts`` (leading axis len(dts) + 1)."""
-    system = family(params) if fixed is None else family(params, fixed)
-    step = roll(splitting(system, scheme, split, **dict(options)))
+ADJOINTS = ("checkpoint", "reversible")
 
-    @jax.checkpoint
-    def interval(x, dt):
-        h = dt / n_sub
-        x = jax.lax.fori_loop(0, n_sub, lambda _, y: step(y, h), x)
-        return x, x
+
+def predict(family, params, x0, dts, *, scheme, split=None, options=(), n_sub: int = 1, fixed=None,
+            adjoint: str = "checkpoint"):
+    """The states at t0 and after every interval of ``dts`` (leading axis len(dts) + 1);
+    ``adjoint`` as in the module docstring."""
+    system = family(params) if fixed is None else family(params, fixed)
+    if adjoint == "reversible":  # the unrolled Composition: what the reversible adjoint walks back
+        step = splitting(system, scheme, split, **dict(options))
+        check_adjoint("reversible", step)
+
+        def interval(x, dt):
+            x = advance(step, x, dt / n_sub, n_sub, "reversible")
+            return x, x
+    else:
+        step = roll(splitting(system, scheme, split, **dict(options)))
+
+        @jax.checkpoint
+        def interval(x, dt):
+            h = dt / n_sub
+            x = jax.lax.fori_loop(0, n_sub, lambda _, y: step(y, h), x)
+            return x, x
 
     later = jax.lax.scan(interval, x0, dts)[1]
     return jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a[None], b]), x0, later)
@@ -155,11 +175,15 @@ class Model(eqx.Module):
     n_sub: int = eqx.field(static=True)
     fit_x0: bool = eqx.field(static=True)
     observe: Any = eqx.field(static=True)
+    measure: Any = eqx.field(static=True, default=None)
+    adjoint: str = eqx.field(static=True, default="checkpoint")
 
     def residuals(self, theta, data):
         params, x0 = theta["params"], (theta["x0"] if self.fit_x0 else data["x0"])
         states = predict(self.family, params, x0, data["dts"], scheme=self.scheme, split=self.split,
-                         options=self.options, n_sub=self.n_sub, fixed=data["fixed"])
+                         options=self.options, n_sub=self.n_sub, fixed=data["fixed"], adjoint=self.adjoint)
+        if self.measure is not None:
+            return (jnp.reshape(self.measure(states), (-1,)) - data["observed"]).reshape(-1)
         seen = jax.vmap(self.observe)(states) if self.observe is not None else states
         flat = jnp.concatenate([jnp.reshape(a, (a.shape[0], -1)) for a in jax.tree_util.tree_leaves(seen)], axis=1)
         return (flat - data["observed"]).reshape(-1)
@@ -172,6 +196,9 @@ def _optimise(model, theta, data, adam_steps: int, adam_lr: float, lbfgs_iter: i
 
 @eqx.filter_jit
 def _curvature(model, theta, data):
+    # forward mode (p passes for p parameters): the reversible adjoint has no JVP, and the
+    # checkpointed model computes the same values (forward mode stores nothing either way)
+    model = dataclasses.replace(model, adjoint="checkpoint")
     flat, unravel = jax.flatten_util.ravel_pytree(theta)
     jac = jax.jacfwd(lambda f: model.residuals(unravel(f), data))(flat)
     r = model.residuals(theta, data)
@@ -222,17 +249,20 @@ def _observations(t, observed):
     return t, rows
 
 
-def fit(family, t, observed, params0, *, x0=None, fit_x0: bool = True, fixed=None, observe=None,
-        scheme="kahan-li-6", split=None, max_step: float = 0.05, adam_steps: int = 50, adam_lr: float = 3e-4,
-        lbfgs_iter: int = 200, tol: float = 1e-10, **split_options) -> ParameterFit:
+def fit(family, t, observed, params0, *, x0=None, fit_x0: bool = True, fixed=None, observe=None, measure=None,
+        scheme="kahan-li-6", split=None, max_step: float = 0.05, adjoint: str = "checkpoint", adam_steps: int = 50,
+        adam_lr: float = 3e-4, lbfgs_iter: int = 200, tol: float = 1e-10, **split_options) -> ParameterFit:
     """Fit ``params`` of the system ``family(params)`` (``family(params, fixed)`` with
     ``fixed``) to states ``observed`` (a PyTree with a leading axis n) at times ``t`` (n,).
 
     ``params0`` is the starting point (any PyTree of floats; parametrise positive quantities
     by their logarithm in ``family``). ``x0`` is the initial state (default: the first
     observation, which needs ``observe=None``), fitted too unless ``fit_x0=False``.
-    ``observe(x)`` maps a state to what was observed. The model integrates ``scheme`` on
-    ``split`` (with ``split_options``) with ⌈Δt / max_step⌉ steps per interval. optax Adam
+    ``observe(x)`` maps a state to what was observed; ``measure(states)`` instead maps the
+    whole predicted trajectory (leading axis n) to what was observed (then ``observed`` is
+    that array, of any shape, and ``x0`` is needed). The model integrates ``scheme`` on
+    ``split`` (with ``split_options``) with ⌈Δt / max_step⌉ steps per interval; ``adjoint``
+    ("checkpoint" or "reversible", module docstring) is what its gradient stores. optax Adam
     (``adam_steps``), then L-BFGS (``lbfgs_iter``), on the mean squared misfit; one
     compilation per model and data shape (the parameters and data are traced inside it).
     Returns a ``ParameterFit`` (concrete NumPy values) in the dtype of ``x0``.
@@ -255,18 +285,29 @@ def fit(family, t, observed, params0, *, x0=None, fit_x0: bool = True, fixed=Non
     adam_steps = count(adam_steps, "adam_steps", 0, MAX_ITERATIONS - 1, "Adam's steps are counted in int32")
     lbfgs_iter = count(lbfgs_iter, "lbfgs_iter", 0, MAX_ITERATIONS, "L-BFGS counts its iterations in int32")
     adam_lr, tol = positive(adam_lr, "adam_lr"), positive(tol, "tol", zero=True)
-    t, rows = _observations(t, observed)
+    if adjoint not in ADJOINTS:
+        raise InputError(f"adjoint must be one of {ADJOINTS}, got {adjoint!r}")
+    if measure is not None:
+        if observe is not None:
+            raise InputError("give observe= (per state) or measure= (of the whole trajectory), not both")
+        t, _ = _observations(t, np.zeros((len(np.atleast_1d(t)), 1)))
+        rows = np.asarray(observed, dtype=float).reshape(-1)
+        if not np.all(np.isfinite(rows)):
+            raise InputError("observed must be finite (no NaN or inf)")
+    else:
+        t, rows = _observations(t, observed)
     n_sub = substeps(t, max_step)
     if x0 is None:
-        if observe is not None:
-            raise InputError("give x0= when only part of the state is observed (observe=...)")
+        if observe is not None or measure is not None:
+            raise InputError("give x0= when only part of the state is observed (observe=... or measure=...)")
         x0 = jax.tree_util.tree_map(lambda a: a[0], as_state(observed, "observed"))
     x0 = as_state(x0, "x0")
     dtype = float_dtype(x0)
     params0 = jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), params0)
     system = family(params0) if fixed is None else family(params0, fixed)
     split, options = system.resolve_split(split, **split_options)
-    model = Model(family, scheme, split, tuple(sorted(options.items())), n_sub, bool(fit_x0), observe)
+    model = Model(family, scheme, split, tuple(sorted(options.items())), n_sub, bool(fit_x0), observe, measure,
+                  adjoint)
     data = {"x0": x0, "dts": jnp.asarray(np.diff(t), dtype), "observed": jnp.asarray(rows, dtype),
             "fixed": None if fixed is None else jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), fixed)}
     theta = {"params": params0, "x0": x0 if fit_x0 else None}
