@@ -21,8 +21,9 @@ BAOAB (Appl. Math. Res. Express 2013, 34; the dissipative–stochastic part in t
   ``spin_lattice``): a Poisson map.
 * O(h): the damping and the noise, per sublattice (``vertex_colours``: no bond joins two sites
   of a colour, so the exchange and Zeeman field g_i = ∂H/∂S_i on a colour's sites is frozen
-  while they move), swept forward over the colours with h/2 and back with h/2; on colour c
-  for a time τ: damping(τ/2) · noise(τ) · damping(τ/2), with the anisotropy's damping (a
+  while they move), swept forward over the colours with h/2 and back with h/2 (a ``lax.scan``
+  over the visits: one compiled visit); on colour c for a time τ:
+  damping(τ/2) · noise(τ) · damping(τ/2), with the anisotropy's damping (a
   site-local piece) before and after the sweep. Each is an exact solution:
 
   - damping in a frozen field B = −g: S turns about S × B towards B, the angle θ to B obeys
@@ -128,25 +129,22 @@ class Langevin(AbstractFlow):
     hamiltonian: AbstractFlow
     temperature: jax.Array
     damping: jax.Array
-    masks: tuple  # one (N, 1) array per sublattice: 1.0 on its sites
+    masks: jax.Array  # (K, N, 1): 1.0 on the sites of sublattice k
 
     def _field(self, s):
         """∂(exchange + DM + XXZ + Zeeman)/∂S_i: frozen on a sublattice while it moves."""
         return jax.grad(lambda y: jnp.sum(self.system._no_anisotropy_energy(y)))(s)
 
-    def _sublattice(self, s, mask, tau, noises):
-        """damping(τ/2) · noise(τ) · damping(τ/2) on the sites of ``mask``, once per entry of
-        ``noises`` (a colour visited twice in a row: the adjacent damping halves merge)."""
+    def _sublattice(self, s, mask, tau, noise):
+        """damping(τ/2) · noise(τ) · damping(τ/2) on the sites of ``mask``."""
         dtype = s.dtype
         lam = jnp.asarray(self.damping, dtype)
         field = -self._field(s)  # B_eff = −∂H/∂S_i, unchanged while this sublattice turns
         sigma = jnp.sqrt(2 * lam * jnp.asarray(self.temperature, dtype) * tau) * mask
         half = (0.5 * lam * tau) * mask
         s = damp_towards(s, field, half)
-        for k, noise in enumerate(noises):
-            s = turn(s, sigma * noise)
-            s = damp_towards(s, field, half if k == len(noises) - 1 else 2 * half)
-        return s
+        s = turn(s, sigma * noise)
+        return damp_towards(s, field, half)
 
     def _anisotropy(self, s, tau):
         dtype = s.dtype
@@ -159,20 +157,24 @@ class Langevin(AbstractFlow):
         h = jnp.asarray(h, s.dtype)
         key, draw = jax.random.split(key)
         # one draw per site for the forward sweep and one for the backward sweep (the
-        # sublattices are disjoint, so a colour's masked share is independent of the others')
-        # Gaussian numbers drawn in float32 (2.5x cheaper than float64 here; their 24-bit resolution
-        # is far below any statistical error, and the rotations stay in the state's dtype)
-        forward, backward = jax.random.normal(draw, (2,) + s.shape, jnp.float32).astype(s.dtype)
-        masks = [jnp.asarray(m, s.dtype) for m in self.masks]
+        # sublattices are disjoint, so a colour's masked share is independent of the others');
+        # drawn in float32 (2.5x cheaper than float64 here; their 24-bit resolution is far
+        # below any statistical error, and the rotations stay in the state's dtype)
+        noise = jax.random.normal(draw, (2,) + s.shape, jnp.float32).astype(s.dtype)
+        masks = jnp.asarray(self.masks, s.dtype)  # (K, N, 1)
+        k = masks.shape[0]
+        visits = (masks[jnp.asarray(list(range(k)) + list(range(k - 1, -1, -1)))],
+                  jnp.asarray([0] * k + [1] * k))  # forward over the colours, then back
+
+        def visit(y, sweep):
+            mask, which = sweep
+            return self._sublattice(y, mask, h / 2, noise[which]), None
+
         anisotropic = _present(self.system.anisotropy)
         s = self.hamiltonian(s, h / 2)
         if anisotropic:
             s = self._anisotropy(s, h / 2)
-        for mask in masks[:-1]:
-            s = self._sublattice(s, mask, h / 2, (forward,))
-        s = self._sublattice(s, masks[-1], h / 2, (forward, backward))  # the turning point of the sweep
-        for mask in reversed(masks[:-1]):
-            s = self._sublattice(s, mask, h / 2, (backward,))
+        s = jax.lax.scan(visit, s, visits)[0]  # one compiled visit, whatever the colours
         if anisotropic:
             s = self._anisotropy(s, h / 2)
         s = self.hamiltonian(s, h / 2)
@@ -216,5 +218,5 @@ def langevin(system, temperature, damping, scheme="strang") -> Langevin:
         raise InputError(f"langevin acts on a spin lattice (jaxsplit.spin_lattice), got {type(system).__name__}")
     temperature = check_number(temperature, "temperature")
     damping = check_number(damping, "damping")
-    masks = tuple(system._mask(group) for group in vertex_colours(system.lattice))
+    masks = jnp.stack([system._mask(group) for group in vertex_colours(system.lattice)])
     return Langevin(system, splitting(system, scheme, "bonds"), temperature, damping, masks)

@@ -50,8 +50,12 @@ class MonteCarlo(NamedTuple):
 
 def default_spread(system: SpinLattice, temperature) -> float:
     """min(π, √(2T/E)) radians with E the largest per-site energy scale Σ_bonds |J| + |B| + 2|K|
-    (times the spin length): acceptance near one half from high to low T."""
+    (times the spin length): acceptance near one half from high to low T; 1.0 where a parameter
+    is traced."""
     lat = system.lattice
+    values = (system.exchange, system.anisotropic, system.field, system.anisotropy, system.spin_length, temperature)
+    if not all(is_concrete_value(v) for v in values):
+        return 1.0  # traced parameters (a system passed through jit): give spread= for your case
     j = np.broadcast_to(np.abs(host_values(system.exchange, whole=True)) + np.abs(
         host_values(system.anisotropic, whole=True)), (lat.n_bonds,))
     per_site = np.bincount(lat.bonds.reshape(-1), weights=np.repeat(j, 2), minlength=lat.n_sites)
@@ -79,7 +83,7 @@ def metropolis(system, temperature, state, key, sweeps: int, *, spread=None) -> 
     temperature = check_number(temperature, "temperature")
     sweeps = check_count(sweeps, "sweeps", 1)
     if spread is None:
-        spread = default_spread(system, temperature) if is_concrete_value(temperature) else 1.0
+        spread = default_spread(system, temperature)
     spread = check_number(spread, "spread", "> 0")
     state = system.check_state(state)
     s = system.sites(state)
