@@ -90,17 +90,17 @@ def test_reproducible_vmappable_and_traced(chain_batch):
 
 
 @jax.jit
-@jax.vmap
-def metropolis_runs(system, t, key, spread):
+def metropolis_runs(system, t, keys, spread):
+    """Replicas (one per key) of 400 sweeps from the ordered state; the system is an argument,
+    so every chain of N_CHAIN sites shares the program."""
     up = jnp.broadcast_to(jnp.array([0.0, 0.0, 1.0]), (system.n_sites, 3))
-    return jaxsplit.metropolis(system, t, up, key, 400, spread=spread)
+    return jax.vmap(lambda k: jaxsplit.metropolis(system, t, up, k, 400, spread=spread))(keys)
 
 
 def test_metropolis_matches_fisher_and_keeps_lengths():
     t = 0.5
     keys = jax.random.split(jax.random.PRNGKey(1), REPLICAS)
-    batch = jax.tree_util.tree_map(lambda a: jnp.stack([a] * REPLICAS), CHAIN)
-    runs = metropolis_runs(batch, jnp.full(REPLICAS, t), keys, jnp.full(REPLICAS, 1.0))
+    runs = metropolis_runs(CHAIN, t, keys, 1.0)
     corr = -np.asarray(runs.energy)[:, 100:] / N_CHAIN  # H = −Σ S_i·S_{i+1}
     mean, se = replica_stats(corr.mean(axis=1))
     assert abs(mean - fisher(t)) <= Z_MAX * se, (mean, fisher(t), se)
@@ -160,12 +160,11 @@ def test_structure_factor_from_thermal_states_peaks_on_spin_waves():
     classical renormalisation of the frequencies at T is of order T/J)."""
     b, h = 0.1, 0.1
     ring = jaxsplit.spin_lattice(CHAIN.lattice, exchange=1.0, field=(0.0, 0.0, b))
-    batch = jax.tree_util.tree_map(lambda a: jnp.stack([a] * 2), ring)
-    states = metropolis_runs(batch, jnp.full(2, 0.02), jax.random.split(jax.random.PRNGKey(8), 2),
-                             jnp.full(2, 0.1)).final
+    states = metropolis_runs(ring, 0.02, jax.random.split(jax.random.PRNGKey(8), REPLICAS), 0.1).final[:2]
+    assert metropolis_runs._cache_size() == 1  # the program of the test above: another system, the same shapes
     assert float(jnp.min(states[..., 2])) < 0.999  # thermal, not the ordered state
     poisson = jaxsplit.splitting(ring, "strang", "bonds")
-    traj = jax.vmap(lambda s: jaxsplit.integrate(poisson, s, h, 1024, save_every=2).x)(states)
+    traj = jaxsplit.integrate(poisson, states, h, 1024, save_every=2).x.swapaxes(0, 1)  # a batch of two
     parts = [jaxsplit.structure_factor(traj[r], ring.lattice, 2 * h, components="xy") for r in range(2)]
     sqw = parts[0]._replace(intensity=sum(np.asarray(p.intensity) for p in parts) / 2)
     q = 2 * np.pi * np.arange(N_CHAIN) / N_CHAIN
