@@ -31,13 +31,13 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
+import jax.numpy as jnp
+import numpy as np
 
 sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parent))
-from _common import finish, header, log, machine_info  # noqa: E402
+from _common import finish, header, log, machine_info
 
-import jaxsplit  # noqa: E402
+import jaxsplit
 
 
 def fisher(t: float) -> float:
@@ -48,9 +48,9 @@ def langevin_run(system, temperature, damping, h, t_total, t_burn, replicas, see
     """Per-replica time averages of ``observable(spins) -> (...,)`` after ``t_burn``; the largest
     ||S_i| − 1|; seconds of the run (compiled beforehand)."""
     step = jaxsplit.langevin(system, temperature, damping)
-    n_steps = int(round(t_total / h))
-    every = max(1, int(round(dt_save / h)))
-    burn = int(round(t_burn / (every * h)))
+    n_steps = round(t_total / h)
+    every = max(1, round(dt_save / h))
+    burn = round(t_burn / (every * h))
     s0 = system.uniform()
 
     @jax.jit
@@ -120,7 +120,7 @@ def main(argv=None):
         e_llg, se_llg = stats(means)
         t0 = time.perf_counter()
         start_sq = square.uniform()
-        runs = jax.jit(jax.vmap(lambda k, t=temperature: jaxsplit.metropolis(square, t, start_sq, k, sweeps)))(
+        runs = jax.jit(jax.vmap(lambda k, t=temperature, s=start_sq: jaxsplit.metropolis(square, t, s, k, sweeps)))(
             jax.random.split(jax.random.PRNGKey(int(10 * temperature) + 99), r_sq))
         energy = np.asarray(runs.energy)[:, sweeps // 4:] / square.n_sites
         mc_seconds = time.perf_counter() - t0
@@ -159,36 +159,36 @@ def main(argv=None):
 
     # the record ---------------------------------------------------------------------------
     lines = header(out, "Thermal spins (`benchmarks/spin_thermal.py`)")
-    lines += [f"Stochastic LLG by `jaxsplit.langevin` (Strang on the exact bond flows for h/2, the per-sublattice "
+    lines += [(f"Stochastic LLG by `jaxsplit.langevin` (Strang on the exact bond flows for h/2, the per-sublattice "
               f"exact damping and Gaussian-rotation noise for h, Strang for h/2), damping λ = {lam}, k_B = 1, "
               "J = 1, unit spins, float64. Standard errors (se) from independent replicas (own keys): the "
-              "spread of the replica means / √R.", "",
+              "spread of the replica means / √R."), "",
               f"### Heisenberg ring N = {n_chain}: ⟨S_i·S_(i+1)⟩ against Fisher (1964)", "",
               f"{r_chain} replicas, t = {t_total:g} each, averages after t = {t_total / 5:g} (saved every 0.5).", "",
               "| T | h | measured | se | exact u | (measured − u)/se | spin-steps/s |", "|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['T']} | {r['h']} | {r['measured']:.5f} | {r['se']:.5f} | {r['exact']:.5f} | "
                      f"{r['z']:+.2f} | {r['spin_steps_per_s'] / 1e6:.2f} M |")
-    lines += ["", "Time-step bias: the difference between the two h at each T (and against u) is the h-dependence "
-              "of the splitting's stationary averages; where it is below ~1 se it is not resolved by these runs.", ""]
+    lines += ["", ("Time-step bias: the difference between the two h at each T (and against u) is the h-dependence "
+              "of the splitting's stationary averages; where it is below ~1 se it is not resolved by these runs."), ""]
     for temperature in (0.25, 0.5, 1.0):
         a, b = (r for r in rows if r["T"] == temperature)
         lines.append(f"* T = {temperature}: m(h={a['h']}) − m(h={b['h']}) = {a['measured'] - b['measured']:+.5f} "
                      f"± {np.hypot(a['se'], b['se']):.5f}")
     lines += ["", f"### Square lattice {l_sq} × {l_sq}: energy per spin, sLLG against Metropolis", "",
-              f"{r_sq} replicas each; sLLG h = {h_sq}, t = {t_sq:g} (averages after t = {t_sq / 5:g}); Metropolis "
-              f"{sweeps} checkerboard sweeps (first {sweeps // 4} dropped).", "",
+              (f"{r_sq} replicas each; sLLG h = {h_sq}, t = {t_sq:g} (averages after t = {t_sq / 5:g}); Metropolis "
+              f"{sweeps} checkerboard sweeps (first {sweeps // 4} dropped)."), "",
               "| T | sLLG E/N | se | Metropolis E/N | se | z | acceptance |", "|---|---|---|---|---|---|---|"]
     for r in srows:
         lines.append(f"| {r['T']} | {r['sllg']:.5f} | {r['se_sllg']:.5f} | {r['mc']:.5f} | {r['se_mc']:.5f} | "
                      f"{r['z']:+.2f} | {r['acceptance']:.2f} |")
-    lines += ["", f"### |S_i| through the stochastic runs", "",
+    lines += ["", "### |S_i| through the stochastic runs", "",
               f"max_i ||S_i| − 1| over every saved state of every run above: {worst:.2e}.", "",
               f"### S(q, ω) at T = {t_w}, ring N = {n_w}, B = {b_w}", "",
-              f"{r_w} Metropolis states, each integrated by Strang (h = {h_w}, {steps_w} steps); resolution "
+              (f"{r_w} Metropolis states, each integrated by Strang (h = {h_w}, {steps_w} steps); resolution "
               f"Δω = {sqw.resolution:.4f}. Peak against ω(q) = 2J(1 − cos q) + B over q ≠ 0: largest miss "
               f"{out['sqw']['max_miss']:.4f} ({100 * out['sqw']['max_relative_miss']:.1f} % of ω), median "
-              f"{out['sqw']['median_bins']:.1f} bins.", "",
+              f"{out['sqw']['median_bins']:.1f} bins."), "",
               "| q/2π·N | " + " | ".join(str(m) for m in range(0, n_w // 2 + 1, max(1, n_w // 16))) + " |",
               "|---|" + "---|" * len(range(0, n_w // 2 + 1, max(1, n_w // 16)))]
     picks = list(range(0, n_w // 2 + 1, max(1, n_w // 16)))

@@ -78,7 +78,7 @@ def test_zero_temperature_damping_lowers_the_energy(chain_batch):
 
 
 def test_reproducible_vmappable_and_traced(chain_batch):
-    (ts, keys, starts), (corr, energy, _) = chain_batch
+    (ts, keys, starts), (_, energy, _) = chain_batch
     order = np.roll(np.arange(len(ts)), 5)  # the same runs at other places in the batch
     again = chain_run(ts[order], keys[order], starts[order])
     np.testing.assert_allclose(np.asarray(again[1]), np.asarray(energy)[order], rtol=0, atol=1e-12)

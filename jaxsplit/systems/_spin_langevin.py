@@ -48,7 +48,6 @@ spins with one key draws independent noise for every replica; ``jax.vmap`` over 
 pairs runs replicas with keys of their own.
 """
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
