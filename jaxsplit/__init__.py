@@ -123,8 +123,12 @@ if typing.TYPE_CHECKING:
     from .systems._rigid_body import symmetric_solution as symmetric_solution
     from .systems._spin_integrators import heun as heun
     from .systems._spin_integrators import spherical_midpoint as spherical_midpoint
+    from .systems._spin_langevin import Langevin as Langevin
+    from .systems._spin_langevin import langevin as langevin
     from .systems._spin_lattice import SpinLattice as SpinLattice
     from .systems._spin_lattice import spin_lattice as spin_lattice
+    from .systems._spin_metropolis import MonteCarlo as MonteCarlo
+    from .systems._spin_metropolis import metropolis as metropolis
     from .systems._splitting import splitting as splitting
     from .systems.so3 import AxisRotation as AxisRotation
     from .systems.so3 import VectorRotation as VectorRotation

@@ -13,7 +13,9 @@ cheapest scheme, split and step for a tolerance), ``_validate`` (one-line errors
 concrete parameters and states: ``check_state`` of the spinning-body systems), ``so3``
 (rotations, quaternions, rotation flows that turn declared parts of a state), ``_spin_lattice``
 (classical spins on a lattice or bond graph, split into the exact bond and site flows of
-``_spin_flows``) with the baselines of ``_spin_integrators`` (spherical midpoint, Heun).
+``_spin_flows``) with the baselines of ``_spin_integrators`` (spherical midpoint, Heun), the thermal
+dynamics of ``_spin_langevin`` (stochastic LLG by exact rotations) and the Metropolis sampler
+of ``_spin_metropolis``.
 """
 
 from . import so3 as so3
@@ -37,8 +39,12 @@ from ._spin import Commuting as Commuting
 from ._spin import MomentumSpin as MomentumSpin
 from ._spin_integrators import heun as heun
 from ._spin_integrators import spherical_midpoint as spherical_midpoint
+from ._spin_langevin import Langevin as Langevin
+from ._spin_langevin import langevin as langevin
 from ._spin_lattice import SpinLattice as SpinLattice
 from ._spin_lattice import spin_lattice as spin_lattice
+from ._spin_metropolis import MonteCarlo as MonteCarlo
+from ._spin_metropolis import metropolis as metropolis
 from ._splitting import splitting as splitting
 
 
