@@ -56,11 +56,11 @@ import tempfile
 import time
 from pathlib import Path
 
-import jaxsplit  # noqa: E402 (before JAX starts its backend: tune_cpu below)
+import jaxsplit
 
 TUNED = jaxsplit.tune_cpu()  # XLA's CPU tuning for every program of this process, as the CLI does
 
-import jax  # noqa: E402
+import jax
 
 jax.config.update("jax_enable_x64", True)
 
@@ -350,6 +350,7 @@ def kernel_profile(size: int, step, repeats: int, quick: bool) -> dict:
     gather path (the same system with one J per bond: gather + turn), variants of the gather
     path's rotation, and the hand-fused one; ns per spin per colour flow, interleaved rounds."""
     from _spin_kernels import _fused_colour, _half_polynomials, half_angle_terms
+
     from jaxsplit import lattices, systems
     from jaxsplit.systems._spin_flows import turn  # the rotation jaxsplit's gather-path bond flows use
     from jaxsplit.systems._spin_pairs import Components, _kernel
