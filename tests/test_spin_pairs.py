@@ -46,7 +46,7 @@ def test_fast_path_is_the_gather_path_to_round_off(name, size):
     assert float(jnp.max(jnp.abs(run - jaxsplit.integrate(reference, s0, 0.05, 30).final))) < ROUND_OFF
     shaped = s0.reshape(fast.lattice.shape + (3,))
     out = jaxsplit.integrate(step, shaped, 0.05, 30).final
-    assert out.shape == shaped.shape and float(jnp.max(jnp.abs(out.reshape(-1, 3) - run))) == 0.0
+    assert out.shape == shaped.shape and float(jnp.max(jnp.abs(out.reshape(-1, 3) - run))) < ROUND_OFF
     # each flow alone, on the user's layout, is the gather path's flow
     for f, g in zip(step.flows, reference.flows, strict=True):
         for t in (0.37, 4.0):
