@@ -388,8 +388,8 @@ def kernel_profile(size: int, step, repeats: int, quick: bool) -> dict:
     cases = {
         "jaxsplit's colour flow, fast path (PairExchange: pairs by reshape, components first, tier switch)":
             (lambda s: fast(Components(s), t).array, first),
-        "its kernel alone, polynomial tier of h = 0.01 (|φ| <= 1/16)": (lambda s: _kernel(s, 3, 0, 0, t, 2.0**-4), first),
-        "its kernel alone, full range (sqrt, so3.half_turn, division)": (lambda s: _kernel(s, 3, 0, 0, t, None), first),
+        "its kernel alone, polynomial tier of h = 0.01 (|φ| <= 1/16), no switch": (lambda s: _kernel(s, t, 3, 0, 0, 2.0**-4), first),
+        "its kernel alone, full range (sqrt, so3.half_turn, division)": (lambda s: _kernel(s, t, 3, 0, 0, None), first),
         "jaxsplit's gather path (BondExchange: gather + turn)": (lambda s: flow(s, t), spins),
         "its gather alone (jnp.take of the partners, (N, 3))": (lambda s: jnp.take(s, partner, axis=0), spins),
         "its turn() alone ((N, 3): reduce, sqrt, sin, cos, divide, jnp.cross)": (lambda s: turn(s, (-t) * s), spins),

@@ -121,16 +121,12 @@ class PairExchange(AbstractFlow):
         jt = jnp.asarray(self.coupling, x.dtype) * t
         bound = SAFETY * jnp.abs(jt) * jnp.asarray(self.longest, x.dtype)
         tier = sum((bound > limit).astype(jnp.int32) for limit in TIERS)
-        # only the coefficients (A, B) depend on the tier: the switch computes them, once per
-        # pair (a kernel boundary); the rotation of the ends is one kernel after it
-        d = len(self.shape)
-        a, _, (sx, sy, sz), restore = _ends(x, d, self.axis, self.parity)
-        k = 0.5 * jt
-        z = (k * k) * (sx * sx + sy * sy + sz * sz)
-        branches = [lambda z, k, limit=limit: _pair_coefficients(z, k, limit, x.dtype) for limit in TIERS + (None,)]
-        A, B = jax.lax.switch(tier, branches, z, k)
-        return Components(restore(*_turned(a, (sx, sy, sz), A, B)))
-
+        # one kernel per flow: XLA evaluates the coefficients again for each of a pair's six new
+        # components; computing them once in the switch and turning the ends after it (three
+        # kernels more, 96 instead of 48 B/spin moved) measured no faster (spins-profile.md)
+        branches = [functools.partial(_kernel, d=len(self.shape), axis=self.axis, parity=self.parity, limit=limit)
+                    for limit in TIERS + (None,)]
+        return Components(jax.lax.switch(tier, branches, x, jt))
 
 
 def _ends(x, d, axis, parity):
@@ -163,28 +159,13 @@ def _turned(a, s, A, B):
     return new, (sx - new[0], sy - new[1], sz - new[2])
 
 
-def _kernel(x, d, axis, parity, jt, limit):
-    """The flow in one pass (one kernel: XLA evaluates the coefficients again for each of the six
-    new components of a pair): the profile's comparison for ``PairExchange``'s split form."""
-    ax = x.ndim - d + axis
-    cax = x.ndim - d - 1
-    if parity:
-        x = jnp.roll(x, -1, ax)
-    size = x.shape[ax]
-    pairs = x.reshape(x.shape[:ax] + (size // 2, 2) + x.shape[ax + 1:])
-    ends = [jnp.take(pairs, e, axis=ax + 1) for e in (0, 1)]
-    a = [jnp.take(ends[0], i, axis=cax) for i in range(3)]
-    b = [jnp.take(ends[1], i, axis=cax) for i in range(3)]
-    sx, sy, sz = a[0] + b[0], a[1] + b[1], a[2] + b[2]
+def _kernel(x, jt, d, axis, parity, limit):
+    """The flow of the colour (``axis``, ``parity``) for J t = ``jt`` on x (..., 3, L_1, ..., L_d),
+    the coefficients from the polynomials on |φ| <= ``limit`` (None: full range), in one pass."""
+    a, _, s, restore = _ends(x, d, axis, parity)
     k = 0.5 * jt
-    A, B = _pair_coefficients((k * k) * (sx * sx + sy * sy + sz * sz), k, limit, x.dtype)
-    cx, cy, cz = sy * a[2] - sz * a[1], sz * a[0] - sx * a[2], sx * a[1] - sy * a[0]
-    dx, dy, dz = sy * cz - sz * cy, sz * cx - sx * cz, sx * cy - sy * cx
-    new = (a[0] - 2 * (A * cx - B * dx), a[1] - 2 * (A * cy - B * dy), a[2] - 2 * (A * cz - B * dz))
-    first = jnp.stack(new, axis=cax)
-    second = jnp.stack([sx - new[0], sy - new[1], sz - new[2]], axis=cax)
-    out = jnp.stack([first, second], axis=ax + 1).reshape(x.shape)
-    return jnp.roll(out, 1, ax) if parity else out
+    A, B = _pair_coefficients((k * k) * (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]), k, limit, x.dtype)
+    return restore(*_turned(a, s, A, B))
 
 
 class LaidOut(Composition):
