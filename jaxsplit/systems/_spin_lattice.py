@@ -24,7 +24,9 @@ Splits (each a tuple of flows, ``_spin_flows``):
   sign(J) √(J² + |D|²), sin θ = |D|/J', d = D/|D|) is a twisted Heisenberg bond plus an
   Ising bond along d; XXZ adds an Ising bond along z; then the uniaxial anisotropy and the
   Zeeman rotation. Every piece is an exact Hamiltonian flow, so every scheme of the registry
-  gives a Poisson map of its order.
+  gives a Poisson map of its order. On a periodic chain, square or simple-cubic lattice with
+  even lengths and one J (no DM, no XXZ) the colours run as pair flows on reshapes of a
+  components-first state (``_spin_pairs``, ``pair_layout``): the same map to round-off.
 * ``"sublattice"`` (Frank, Huang, Landau, Can. J. Phys. 75 (1997) 1; Krech, Bunker, Landau,
   Comput. Phys. Commun. 111 (1998) 1): sites coloured so that no bond joins two of a colour;
   each sublattice precesses about the frozen field of the others (exchange and Zeeman);
