@@ -56,6 +56,10 @@ import tempfile
 import time
 from pathlib import Path
 
+import jaxsplit
+
+TUNED = jaxsplit.tune_cpu()  # XLA's CPU tuning for every program of this process, as the CLI does
+
 import jax
 
 jax.config.update("jax_enable_x64", True)
@@ -64,8 +68,6 @@ import jax.numpy as jnp
 import numpy as np
 from _common import finish, header, log, machine_info
 from _spin_kernels import energy, fused_run, numpy_run, yoshida_weights
-
-import jaxsplit
 
 H = 0.01
 EXCHANGE = 1.0
@@ -269,11 +271,13 @@ def speed_study(quick: bool, setup, workdir: Path, repeats: int) -> tuple[list, 
         log(f"L = {size}: timing {len(cases)} contenders, {repeats} rounds")
         per = {name: [] for name in cases}
         extra = {name: [] for name in cases}
+        cpu = {name: [] for name in cases}
         for _ in range(repeats):
             for name, fn in cases.items():
-                t0 = time.perf_counter()
+                t0, c0 = time.perf_counter(), time.process_time()
                 out = fn()
                 seconds = time.perf_counter() - t0
+                cpu[name].append((time.process_time() - c0) / (steps[name] * size**3))  # this process only
                 if name.startswith("LAMMPS"):
                     extra[name].append(out)
                     seconds = out["loop_s"]
@@ -284,6 +288,8 @@ def speed_study(quick: bool, setup, workdir: Path, repeats: int) -> tuple[list, 
             row = {"L": size, "N": size**3, "method": name, "steps": steps[name],
                    "spin_steps_per_s": statistics.median(rates), "min": min(rates), "max": max(rates),
                    "rounds": rates}
+            if not name.startswith("LAMMPS"):
+                row["cpu_ns_per_spin_step"] = statistics.median(cpu[name]) * 1e9
             if name.startswith("LAMMPS"):
                 row["memory_bytes_per_spin"] = extra[name][0]["memory_bytes"] / size**3
                 row["setup_and_io_s"] = statistics.median(e["wall_s"] - e["loop_s"] for e in extra[name])
@@ -339,13 +345,22 @@ def loop_kernels(fn, *args) -> dict:
 
 
 def kernel_profile(size: int, step, repeats: int, quick: bool) -> dict:
-    """One colour flow (x bonds, parity 0) repeated n times: jaxsplit's, its parts, variants of
-    its rotation, and the hand-fused one; ns per spin per colour flow, interleaved rounds."""
+    """One colour flow (x bonds, parity 0) repeated n times: jaxsplit's fast path (pairs by
+    reshape, components first, the polynomial tier of h = 0.01 and the full-range kernel), its
+    gather path (the same system with one J per bond: gather + turn), variants of the gather
+    path's rotation, and the hand-fused one; ns per spin per colour flow, interleaved rounds."""
     from _spin_kernels import _fused_colour, _half_polynomials, half_angle_terms
-    from jaxsplit.systems._spin_flows import turn  # the rotation jaxsplit's bond flows use
+
+    from jaxsplit import lattices, systems
+    from jaxsplit.systems._spin_flows import turn  # the rotation jaxsplit's gather-path bond flows use
+    from jaxsplit.systems._spin_pairs import Components, _kernel
 
     n = 20 if quick else 200
-    flow = step.flows[0]
+    fast = step.flows[0]
+    lattice = lattices.lattice("simple-cubic", (size, size, size))
+    gather_step = jaxsplit.splitting(systems.spin_lattice(lattice, exchange=np.full(lattice.n_bonds, EXCHANGE)),
+                                     "strang", "bonds")
+    flow = gather_step.flows[0]
     partner = jnp.asarray(flow.partner.array)
     spins = jnp.asarray(initial_spins(size))
     first = jnp.asarray(components_first(initial_spins(size), size))
@@ -367,22 +382,20 @@ def kernel_profile(size: int, step, repeats: int, quick: bool) -> dict:
         d0, d1, d2 = w1 * c2 - w2 * c1, w2 * c0 - w0 * c2, w0 * c1 - w1 * c0
         return jnp.stack([x0 + a * c0 + b * d0, x1 + a * c1 + b * d1, x2 + a * c2 + b * d2], axis=-1)
 
-    def rolled(s, terms):  # the per-site form on (3, L, L, L): each site's partner along x by a roll
-        even = jax.lax.broadcasted_iota(jnp.int32, s.shape[1:], 0) % 2 == 0
-        w = (-t) * (s + jnp.where(even, jnp.roll(s, -1, 1), jnp.roll(s, 1, 1)))
-        return explicit(jnp.moveaxis(s, 0, -1), jnp.moveaxis(w, 0, -1), True).transpose(3, 0, 1, 2)
-
     def pair_omega(s):
         return (-t) * (s + jnp.take(s, partner, axis=0))
 
     cases = {
-        "jaxsplit's colour flow (BondExchange: gather + turn)": (lambda s: flow(s, t), spins),
+        "jaxsplit's colour flow, fast path (PairExchange: pairs by reshape, components first, tier switch)":
+            (lambda s: fast(Components(s), t).array, first),
+        "its kernel alone, polynomial tier of h = 0.01 (|φ| <= 1/16), no switch": (lambda s: _kernel(s, t, 3, 0, 0, 2.0**-4), first),
+        "its kernel alone, full range (sqrt, so3.half_turn, division)": (lambda s: _kernel(s, t, 3, 0, 0, None), first),
+        "jaxsplit's gather path (BondExchange: gather + turn)": (lambda s: flow(s, t), spins),
         "its gather alone (jnp.take of the partners, (N, 3))": (lambda s: jnp.take(s, partner, axis=0), spins),
         "its turn() alone ((N, 3): reduce, sqrt, sin, cos, divide, jnp.cross)": (lambda s: turn(s, (-t) * s), spins),
-        "gather + turn with components written out, sqrt/sin/cos": (lambda s: explicit(s, pair_omega(s), False), spins),
         "gather + turn with components written out, polynomial": (lambda s: explicit(s, pair_omega(s), True), spins),
-        "per site, components first, partner by roll, polynomial": (lambda s: rolled(s, terms), first),
-        "hand-fused colour flow (pairs by reshape, polynomial)": (lambda s: _fused_colour(s, (0, 0), t, terms), first),
+        "hand-fused colour flow (pairs by reshape, Taylor polynomial for the run's h)":
+            (lambda s: _fused_colour(s, (0, 0), t, terms), first),
     }
     compiled = {}
     for name, (body, x) in cases.items():
@@ -390,13 +403,16 @@ def kernel_profile(size: int, step, repeats: int, quick: bool) -> dict:
         fn(x).block_until_ready()
         compiled[name] = (fn, x)
     per = {name: [] for name in cases}
+    cpu = {name: [] for name in cases}
     for _ in range(repeats):
         for name, (fn, x) in compiled.items():
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             fn(x).block_until_ready()
             per[name].append((time.perf_counter() - t0) / n / size**3 * 1e9)
+            cpu[name].append((time.process_time() - c0) / n / size**3 * 1e9)
     rows = [{"case": name, "ns_per_spin": statistics.median(v), "min": min(v), "max": max(v),
-             "kernels_per_flow": loop_kernels(*compiled[name])} for name, v in per.items()]
+             "cpu_ns_per_spin": statistics.median(cpu[name]), "kernels_per_flow": loop_kernels(*compiled[name])}
+            for name, v in per.items()]
     whole = jax.jit(lambda s: jaxsplit.integrate(step, s, H, 10).final)
     return {"size": size, "rows": rows, "jaxsplit_step_kernels": loop_kernels(whole, spins)}
 
@@ -484,6 +500,8 @@ def main(argv=None):
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--profile", action="store_true",
                         help="only the kernel profile of jaxsplit's bond flow (results/spins-profile.{md,json})")
+    parser.add_argument("--speed-only", action="store_true",
+                        help="the speed study, the profile and memory only (no conventions check, no error study)")
     parser.add_argument("--memory-child", nargs=3, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.memory_child:
@@ -491,7 +509,8 @@ def main(argv=None):
         memory_child(name, int(size), int(steps))
         return
     quick = args.quick
-    command = "python benchmarks/spins.py" + (" --quick" if quick else "") + (" --profile" if args.profile else "")
+    command = ("python benchmarks/spins.py" + (" --quick" if quick else "") + (" --profile" if args.profile else "")
+               + (" --speed-only" if args.speed_only else ""))
     out = machine_info(command)
     source = Path(jaxsplit.__file__).resolve().parent.parent
     head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=source, capture_output=True, text=True,
@@ -500,6 +519,7 @@ def main(argv=None):
                            text=True, check=False).stdout.strip()
     # a checkout of another branch (its commit), or an exported tree named after its branch and commit
     out["jaxsplit_source"] = f"{source.name} at {head}" + (" + uncommitted changes" if dirty else "") if head else source.name
+    out["tune_cpu"] = TUNED
     start = time.perf_counter()
     if args.profile:
         step, reason = jaxsplit_step(RATIO_SIZE)
@@ -517,10 +537,10 @@ def main(argv=None):
         workdir = Path(tmp)
         rows, checks = speed_study(quick, setup, workdir, 3 if quick else 5)
         out["rows"], out["checks"] = rows, checks
-        if setup is not None:
+        if setup is not None and not args.speed_only:
             log("trajectory check")
             out["trajectory"] = trajectory_check(setup, workdir)
-        out["errors"] = {
+        out["errors"] = {} if args.speed_only else {
             "random directions (infinite temperature), seed 2": error_study(setup, workdir, quick, initial_spins(8, seed=2)),
             "within 0.5 rad of +z (spin waves), seed 3": error_study(setup, workdir, quick, near_aligned_spins(8, seed=3))}
     step, _ = jaxsplit_step(RATIO_SIZE)
@@ -554,7 +574,10 @@ def report(out: dict) -> list[str]:
     for name in dict.fromkeys(r["method"] for r in rows):
         cells = [next((_fmt_rate(r) for r in rows if r["L"] == L and r["method"] == name), "—") for L in sizes]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    lines += ["", "### Ratios (median of per-round ratios)", "", "| L | method | against | ratio |", "|---|---|---|---|"]
+    lines += ["", ("CPU time of this process per spin-step (ns, median of rounds; JAX may run a kernel on both "
+                   "cores, so this sums them): " + "; ".join(f"{r['method']} {r['L']}³ {r['cpu_ns_per_spin_step']:.3g}"
+                                                            for r in rows if "cpu_ns_per_spin_step" in r) + "."),
+              "", "### Ratios (median of per-round ratios)", "", "| L | method | against | ratio |", "|---|---|---|---|"]
     for r in rows:
         for base, ratio in r.get("ratio", {}).items():
             jax_contender = not r["method"].startswith(("NumPy", "LAMMPS"))
@@ -603,10 +626,12 @@ def profile_lines(p: dict) -> list[str]:
              ("jaxsplit's stepping loop, one Strang step per iteration (10 colour flows, as the hand-fused loop): "
               f"{', '.join(f'{v} {k}' for k, v in p['jaxsplit_step_kernels'].items())} kernels. The least time of the "
               "rounds is the one least disturbed by other jobs."), "",
-             "| case | ns per spin, median (least–most) | kernels per flow |", "|---|---|---|"]
+             "| case | ns per spin, wall: median (least–most) | CPU ns per spin, median | kernels per flow |",
+             "|---|---|---|---|"]
     for r in p["rows"]:
         kernels = ", ".join(f"{v} {k}" for k, v in r["kernels_per_flow"].items())
-        lines.append(f"| {r['case']} | {r['ns_per_spin']:.3g} ({r['min']:.2g}–{r['max']:.2g}) | {kernels} |")
+        cpu = f"{r['cpu_ns_per_spin']:.3g}" if "cpu_ns_per_spin" in r else ""
+        lines.append(f"| {r['case']} | {r['ns_per_spin']:.3g} ({r['min']:.2g}–{r['max']:.2g}) | {cpu} | {kernels} |")
     return lines
 
 

@@ -56,19 +56,20 @@ class StaticIndex:
         return f"StaticIndex({len(self.array)})"
 
 
-def turn(x, omega):
+def turn(x, omega, axis: int = -1):
     """exp(hat ω) x for angle vectors ω (..., 3): x + a ω×x + b ω×(ω×x) with φ = |ω|,
     a = sin φ/φ = 2 sin(φ/2) cos(φ/2)/φ, b = (1 − cos φ)/φ² = 2 sin²(φ/2)/φ². φ is taken as
     √(ω·ω + tiny) (tiny the dtype's smallest normal number), so at ω = 0 (an antiparallel pair,
     a spin along its field) the map is the identity and its derivatives are finite; a and b
-    lose no digits for small φ (their derivatives' rounding is O(ε/φ), multiplied by ω)."""
-    phi = jnp.sqrt(jnp.sum(omega * omega, axis=-1, keepdims=True) + jnp.finfo(omega.dtype).tiny)
+    lose no digits for small φ (their derivatives' rounding is O(ε/φ), multiplied by ω).
+    ``axis``: the components' axis (-1; a components-first state of ``_spin_pairs``: its own)."""
+    phi = jnp.sqrt(jnp.sum(omega * omega, axis=axis, keepdims=True) + jnp.finfo(omega.dtype).tiny)
     s, c = jnp.sin(phi / 2), jnp.cos(phi / 2)
     s_phi = (s + s) / phi
-    wx = jnp.cross(omega, x)
+    wx = jnp.cross(omega, x, axis=axis)
     # the increment first, then one addition: one rounding at the size of x (|S_i| is a random
     # walk of these roundings over a long run; two additions made it √2 larger)
-    return x + ((s_phi * c) * wx + (0.5 * s_phi * s_phi) * jnp.cross(omega, wx))
+    return x + ((s_phi * c) * wx + (0.5 * s_phi * s_phi) * jnp.cross(omega, wx, axis=axis))
 
 
 def as_sites(x, n_sites: int):
@@ -153,21 +154,46 @@ class BondIsing(_Colour):
 class SiteRotation(AbstractFlow):
     """Exact flow of a single-site piece: Zeeman (``anisotropy`` None: ω_i = −B, ``vector``
     B (3,) or (N, 3)) or uniaxial anisotropy (ω_i = −2K_i (n_i·S_i) n_i, ``anisotropy`` K
-    (N,), ``vector`` n (N, 3) or (3,))."""
+    (N,), ``vector`` n (N, 3) or (3,)). ``shape``: the lattice's shape where the bond split
+    runs components first (``_spin_pairs.Components``), else None."""
 
     vector: jax.Array
     anisotropy: jax.Array | None
     n_sites: int = eqx.field(static=True)
+    shape: tuple | None = eqx.field(static=True, default=None)
 
     def __call__(self, state, t):
+        from ._spin_pairs import Components, PairLayout
+
+        if isinstance(state, Components):  # components first: (..., 3, L_1, ..., L_d)
+            s, axis = state.array, -1 - len(self.shape)
+            v, k = self._first(jnp.asarray(self.vector, s.dtype), 3), None
+            if self.anisotropy is not None:
+                k = jnp.expand_dims(self._first(jnp.asarray(self.anisotropy, s.dtype), 0), axis)
+            return Components(self._turn(s, v, k, t, axis))
+        if self.shape is not None:  # the user's layout, where the bond split needs components first
+            layout = PairLayout(self.shape)
+            return layout.out_of(self(layout.into(state), t), state)
         s, restore = as_sites(state, self.n_sites)
         v = jnp.asarray(self.vector, s.dtype)
-        if self.anisotropy is None:
+        k = None if self.anisotropy is None else jnp.asarray(self.anisotropy, s.dtype)[..., None]
+        return restore(self._turn(s, v, k, t, -1))
+
+    def _first(self, value, width: int):
+        """A per-site parameter (N,) or (N, 3), or a shared one, broadcastable against (3, *shape)."""
+        d = len(self.shape)
+        if value.ndim == (1 if width else 0):  # shared
+            return value.reshape(value.shape + (1,) * d)
+        value = value.reshape(self.shape + value.shape[1:])
+        return jnp.moveaxis(value, -1, 0) if width else value
+
+    @staticmethod
+    def _turn(s, v, k, t, axis):
+        if k is None:
             omega = jnp.broadcast_to(-t * v, s.shape)
         else:
-            k = jnp.asarray(self.anisotropy, s.dtype)[..., None]
-            omega = (-2 * t * k * jnp.sum(v * s, axis=-1, keepdims=True)) * v
-        return restore(turn(s, omega))
+            omega = (-2 * t * k * jnp.sum(v * s, axis=axis, keepdims=True)) * v
+        return turn(s, omega, axis)
 
 
 class FrozenField(AbstractFlow):

@@ -24,7 +24,9 @@ Splits (each a tuple of flows, ``_spin_flows``):
   sign(J) √(J² + |D|²), sin θ = |D|/J', d = D/|D|) is a twisted Heisenberg bond plus an
   Ising bond along d; XXZ adds an Ising bond along z; then the uniaxial anisotropy and the
   Zeeman rotation. Every piece is an exact Hamiltonian flow, so every scheme of the registry
-  gives a Poisson map of its order.
+  gives a Poisson map of its order. On a periodic chain, square or simple-cubic lattice with
+  even lengths and one J (no DM, no XXZ) the colours run as pair flows on reshapes of a
+  components-first state (``_spin_pairs``, ``pair_layout``): the same map to round-off.
 * ``"sublattice"`` (Frank, Huang, Landau, Can. J. Phys. 75 (1997) 1; Krech, Bunker, Landau,
   Comput. Phys. Commun. 111 (1998) 1): sites coloured so that no bond joins two of a colour;
   each sublattice precesses about the frozen field of the others (exchange and Zeeman);
@@ -63,6 +65,7 @@ from ._spin_flows import (
     per_site,
     turn,
 )
+from ._spin_pairs import PairExchange, PairLayout
 from ._validate import _show
 
 SWEEP_MAX_SITES = 256  # one flow per site: beyond this the compile time, not the run, dominates
@@ -342,18 +345,48 @@ class SpinLattice(AbstractSystem):
     def splits(self):
         return {"bonds": self.bonds_split, "sublattice": self.sublattice_split, "sweep": self.sweep_split}
 
-    def _site_pieces(self, zeeman: bool = True) -> tuple:
+    def _site_pieces(self, zeeman: bool = True, shape=None) -> tuple:
         out = ()
         if _present(self.anisotropy):
-            out += (SiteRotation(self.axis, self.anisotropy, self.n_sites),)
+            out += (SiteRotation(self.axis, self.anisotropy, self.n_sites, shape),)
         if zeeman and _present(self.field):
-            out += (SiteRotation(self.field, None, self.n_sites),)
+            out += (SiteRotation(self.field, None, self.n_sites, shape),)
         return out
+
+    def pair_layout(self) -> PairLayout | None:
+        """Where the bond split runs its fast path (``_spin_pairs``): a periodic chain, square or
+        simple-cubic lattice, every length even, one exchange J shared by every bond, no DM and
+        no XXZ term; else None (the gather path)."""
+        lat = self.lattice
+        if lat.name not in ("chain", "square", "simple-cubic") or not lat.periodic or any(n % 2 for n in lat.size):
+            return None
+        if self.exchange.ndim != 0 or self.dm is not None and _present(self.dm) or _present(self.anisotropic):
+            return None
+        if not _present(self.exchange):
+            return None
+        # the colours are the (axis, parity) matchings, in that order (``lattices._lattices``)
+        sites = np.arange(lat.n_sites).reshape(lat.size)
+        for c, colour in enumerate(lat.colours):
+            axis, parity = divmod(c, 2)
+            first = np.take(sites, np.arange(parity, lat.size[axis], 2), axis=axis)
+            second = np.take(sites, (np.arange(parity, lat.size[axis], 2) + 1) % lat.size[axis], axis=axis)
+            want = np.sort(np.stack([first.ravel(), second.ravel()], axis=1), axis=1)
+            got = np.sort(lat.bonds[colour], axis=1)
+            if len(lat.colours) != 2 * len(lat.size) or not np.array_equal(want[np.lexsort(want.T[::-1])],
+                                                                          got[np.lexsort(got.T[::-1])]):
+                return None
+        return PairLayout(tuple(lat.size))
 
     def bonds_split(self) -> tuple:
         """Exact flows: per colour the exchange (twisted by DM), DM's Ising part, XXZ's Ising
         part; then anisotropy and Zeeman (module docstring)."""
         lat = self.lattice
+        layout = self.pair_layout()
+        if layout is not None:  # the fast path: colours as reshapes, components first (``_spin_pairs``)
+            longest = jnp.max(self.spin_length)
+            pieces = tuple(PairExchange(self.exchange, longest, axis, parity, layout.shape)
+                           for axis in range(len(layout.shape)) for parity in (0, 1))
+            return pieces + self._site_pieces(shape=layout.shape)
         has_dm, has_xxz = _present(self.dm), _present(self.anisotropic)
         has_exchange = has_dm or _present(self.exchange)
         pieces = []

@@ -7,6 +7,7 @@ compose them; the result is a ``Composition``, a pure ``step(state, h)``.
 from ..core._compose import Composition, compose
 from ._base import AbstractSystem
 from ._rigid_body import RigidBody
+from ._spin_pairs import PairExchange, laid_out
 
 
 def splitting(system, scheme, split: str | None = None, *, merge_flows: bool | None = None,
@@ -23,4 +24,9 @@ def splitting(system, scheme, split: str | None = None, *, merge_flows: bool | N
     """
     if not isinstance(system, AbstractSystem):
         system = RigidBody(system)
-    return compose(system.split(split, **options), scheme, merge_flows=merge_flows)
+    step = compose(system.split(split, **options), scheme, merge_flows=merge_flows)
+    # a split whose flows run on a layout of their own (a spin lattice's components first,
+    # ``_spin_pairs``): the state converted once per call or run, not once per flow
+    layout = getattr(system, "pair_layout", lambda: None)() if system.resolve_split(split, **options)[0] == "bonds" \
+        else None
+    return step if layout is None or not any(isinstance(f, PairExchange) for f in step.flows) else laid_out(step, layout)
