@@ -94,16 +94,3 @@ def test_bad_input(call, message):
     with pytest.raises(jaxsplit.InputError) as err:
         call()
     assert message in str(err.value)
-
-
-def test_the_python_blocks_of_docs_spins_run(capsys):
-    """docs/spins.md: every ```python block runs as written."""
-    import pathlib
-    import re
-
-    text = (pathlib.Path(__file__).resolve().parent.parent / "docs" / "spins.md").read_text()
-    blocks = re.findall(r"```python\n(.*?)```", text, flags=re.DOTALL)
-    assert blocks
-    for block in blocks:
-        exec(compile(block, "docs/spins.md", "exec"), {})  # noqa: S102  (the documentation's own code)
-    assert "S(q, w): (16, 1025)" in capsys.readouterr().out
