@@ -138,9 +138,18 @@ def profile(size, rounds):
 
     from jaxsplit.systems._spin_flows import turn
 
+    import numpy as np
+
+    import jaxsplit
+    from jaxsplit.lattices import lattice
+
     system, step, s0 = build(size)
     x = jnp.asarray(s0)
-    flow = step.flows[0]
+    pair_flow = step.flows[0]  # the fast path's colour flow (systems/_spin_pairs.py, components first)
+    # the gather path's colour flow: the same lattice with one exchange value per bond
+    cubic = lattice("simple-cubic", size)
+    gather = jaxsplit.spin_lattice(cubic, exchange=np.full(cubic.n_bonds, 1.0))
+    flow = jaxsplit.splitting(gather, "strang", "bonds").flows[0]
     partner = jnp.asarray(flow.partner.array)
     omega = jnp.asarray(0.01 * s0[::-1].copy())
 
@@ -152,7 +161,8 @@ def profile(size, rounds):
         wwx = jnp.stack([w[1] * wx[2] - w[2] * wx[1], w[2] * wx[0] - w[0] * wx[2], w[0] * wx[1] - w[1] * wx[0]])
         return s + ((a * c) * wx + (0.5 * a * a) * wwx)
 
-    fns = {"colour flow (BondExchange)": jax.jit(lambda s: flow(s, 0.005)),
+    fns = {"colour flow, fast path (PairExchange; alone it converts to components first and back)": jax.jit(lambda s: pair_flow(s, 0.005)),
+           "colour flow, gather path (BondExchange)": jax.jit(lambda s: flow(s, 0.005)),
            "partner gather jnp.take": jax.jit(lambda s: jnp.take(s, partner, axis=0)),
            "turn(s, ω), ω given": jax.jit(lambda s, w: turn(s, w)),
            "same turn on (3, N), components first": jax.jit(turn_components),
