@@ -3,8 +3,9 @@
 Every rotation's trigonometry is ``so3.half_turn``: valid for every angle, a reduction modulo
 π and polynomials of 9 + 9 terms on |r| <= π/2 (float64). Most runs turn by far less (256
 free bodies, h = 0.01: half angles below 0.01), where 4 + 4 terms with no reduction are exact
-to the same quarter epsilon; the general kernel made the stepping loop 2.4× slower than that
-short one (``benchmarks/results/against_before.md``). The choice must not depend on values
+to the same quarter epsilon: with them the direct call on 256 free bodies ran 2.1–2.6× faster
+than with the general kernel alone (``benchmarks/results/against_before.md`` at 2857ec7 and
+1f7e0c8, as imported). The choice must not depend on values
 seen at the call (a user's ``jit``, ``vmap`` or ``grad`` hides them), so it is made in the
 program: a run whose flows all declare a bound on their angles (``AbstractFlow.turn_rate``:
 rotations of m, which every one of them keeps |m| of) computes the largest half angle any
@@ -71,12 +72,12 @@ def _largest_batched(axis_size, in_batched, x):
 
 
 def by_angle_bound(step, x, h, run, *operands):
-    """``run(*operands)``, traced once per kernel where ``step`` bounds its angles: under
+    """``run(*operands)``, traced once per kernel where ``step`` (a flow) bounds its angles: under
     ``short_angles`` for each of ``SHORT_LIMITS``, and with the general kernel; ``lax.switch``
     picks the first whose bound covers the run's largest half angle |rate|·|m|·|weight·h|/2
     (from ``x``, the state the run starts from, and h). Where ``step`` declares no bound,
     ``run`` as it is."""
-    rate = step.turn_rate(x) if hasattr(step, "turn_rate") else None
+    rate = step.turn_rate(x)
     if rate is None or not SHORT_LIMITS:
         return run(*operands)
     half = rate * largest(h) / 2
