@@ -42,6 +42,35 @@ def test_bond_lengths_are_one():
         np.testing.assert_allclose(lengths, 1.0, atol=1e-12)
 
 
+@pytest.mark.parametrize("name", ["chain", "square", "triangular", "honeycomb", "simple-cubic"])
+def test_small_periodic_boxes_are_refused_exactly_when_the_bond_list_is_not_simple(name):
+    """``lattices._lattices.simple`` decides from the offsets alone; the oracle builds every bond of
+    the wrapped box by brute force and asks ``check_bonds`` (self-loops, repeated pairs)."""
+    import itertools
+
+    from jaxsplit.lattices._graph import check_bonds
+    from jaxsplit.lattices._lattices import UNIT_CELLS
+
+    cell, basis, types = UNIT_CELLS[name]
+    d, nb = cell.shape[0], len(basis)
+    for size in itertools.product(*([range(1, 5 if d < 3 else 4)] * d)):
+        bonds = [(np.ravel_multi_index(c, size) * nb + a,
+                  np.ravel_multi_index(tuple(np.mod(np.add(c, o), size)), size) * nb + b)
+                 for c in itertools.product(*map(range, size)) for a, b, o in types]
+        try:
+            check_bonds(int(np.prod(size)) * nb, bonds)
+            oracle = True
+        except jaxsplit.InputError:
+            oracle = False
+        try:
+            lat = lattice(name, size)
+            assert oracle, (name, size)
+            assert lat.n_bonds == len(bonds)
+            assert is_proper(lat.n_sites, lat.bonds, lat.colours)
+        except jaxsplit.InputError as err:
+            assert not oracle and "needs at least" in str(err), (name, size, err)
+
+
 def test_any_graph_gets_at_most_delta_plus_one_colours():
     rng = np.random.default_rng(7)
     for _ in range(60):

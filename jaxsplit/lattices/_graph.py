@@ -118,7 +118,7 @@ def is_proper(n_sites: int, bonds, colours) -> bool:
     """Every bond coloured once and each colour a matching."""
     bonds = np.asarray(bonds)
     seen = np.concatenate([np.asarray(c, dtype=np.int64) for c in colours]) if colours else np.zeros(0, np.int64)
-    if sorted(seen.tolist()) != list(range(len(bonds))):
+    if len(seen) != len(bonds) or np.any(seen < 0) or np.any(np.bincount(seen, minlength=len(bonds)) != 1):
         return False
     return all(np.all(degrees(n_sites, bonds[np.asarray(c, dtype=np.int64)]) <= 1) for c in colours)
 

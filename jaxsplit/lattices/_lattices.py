@@ -13,12 +13,10 @@ Site index: row-major over (cell coordinates..., basis site), so a state of shap
 ``lattice.shape + (3,)`` reshapes to (N, 3) without a copy.
 """
 
-import itertools
-
 import numpy as np
 
 from ..core._errors import InputError
-from ._graph import Lattice, check_bonds, is_proper, misra_gries
+from ._graph import Lattice, is_proper, misra_gries
 
 _S3 = np.sqrt(3.0)
 
@@ -68,6 +66,26 @@ def parse_size(name: str, size) -> tuple:
     return size
 
 
+def simple(bond_types, lengths, periodic: bool) -> bool:
+    """Whether the bonds of ``bond_types`` on a box of ``lengths`` cells form a simple graph (no
+    site joined to itself, no pair twice), decided from the offsets alone (the same verdict as
+    ``check_bonds`` on the bond list, without sorting 10⁸ bonds: tests/test_spin_lattice.py). Wrapped
+    around a periodic box, bond types (a, b, o) and (a', b', o') give the same pair at some cell
+    iff o ≡ o' (a = a', b = b') or o ≡ −o' (a = b', b = a') modulo the lengths; a type with
+    a = b joins a site to itself iff o ≡ 0 and repeats its own pairs iff 2·o ≡ 0. Open, the
+    offsets are distinct and nonzero, so the graph is simple whenever a bond fits in the box."""
+    if not periodic:
+        return True
+    wrap = lambda o: tuple(np.mod(np.asarray(o), lengths))  # noqa: E731
+    for t, (a, b, o) in enumerate(bond_types):
+        if a == b and (not any(wrap(o)) or not any(wrap(2 * np.asarray(o)))):
+            return False
+        for a2, b2, o2 in bond_types[t + 1:]:
+            if (a, b) == (a2, b2) and wrap(o) == wrap(o2) or (a, b) == (b2, a2) and wrap(o) == wrap(-np.asarray(o2)):
+                return False
+    return True
+
+
 def lattice(name: str, size, periodic: bool = True) -> Lattice:
     """The lattice ``name`` (chain, square, triangular, honeycomb, simple-cubic) of ``size``
     cells per axis, periodic or open, with its optimal edge colouring (module docstring).
@@ -88,44 +106,37 @@ def lattice(name: str, size, periodic: bool = True) -> Lattice:
     size = parse_size(name, size)
     cell, basis, bond_types = UNIT_CELLS[name]
     n_basis = len(basis)
-    cells = np.array(list(itertools.product(*(range(s) for s in size))), dtype=np.int64).reshape(-1, len(size))
     lengths = np.array(size)
-
-    def index(c, s):
-        return (np.ravel_multi_index(tuple(c.T), size) * n_basis + s) if len(c) else np.zeros(0, np.int64)
-
-    positions = (cells @ cell)[:, None, :] + basis[None, :, :]
+    if not simple(bond_types, lengths, periodic):
+        need = 3 if n_basis == 1 else 2
+        raise InputError(f"a periodic {name} lattice needs at least {need} cells per axis (fewer would join a site "
+                         f"to itself or repeat a bond), got size {'x'.join(map(str, size))}; use periodic=False "
+                         "or a larger size")
+    cells = np.indices(size, dtype=np.int64).reshape(len(size), -1)  # (axes, cells), row-major over the cells
+    numbers = np.arange(cells.shape[1])
+    # Σ_k c_k a_k by axis: a BLAS product with an inner size of 2 or 3 is slower at 10⁸ cells
+    positions = sum(cells[k][:, None] * cell[k] for k in range(len(size)))[:, None, :] + basis[None, :, :]
     bonds, groups = [], []
     for a, b, offset in bond_types:
-        target = cells + np.array(offset)
-        inside = np.all((target >= 0) & (target < lengths), axis=1)
+        target = cells + np.array(offset)[:, None]
         if periodic:
-            inside[:] = True
-            target = target % lengths
-        if periodic and np.any(np.abs(np.array(offset)) >= lengths):
-            continue  # the bond would join a cell to itself or repeat: dropped, and the size refused below
-        pairs = np.stack([index(cells[inside], a), index(target[inside], b)], axis=1)
+            target %= lengths[:, None]
+            source, moved = numbers, cells
+        else:  # bonds whose far end leaves the box are not there
+            inside = np.all((target >= 0) & (target < lengths[:, None]), axis=0)
+            source, moved, target = numbers[inside], cells[:, inside], target[:, inside]
+        pairs = np.stack([source * n_basis + a, np.ravel_multi_index(tuple(target), size) * n_basis + b], axis=1)
         start = sum(len(p) for p in bonds)
         bonds.append(pairs)
         if a != b:
             groups.append(np.arange(start, start + len(pairs)))
         else:  # a cycle along the offset: two matchings by parity along an axis it moves
             axis = int(np.flatnonzero(np.array(offset))[0])
-            parity = cells[inside][:, axis] % 2
+            parity = moved[axis] % 2
             groups += [start + np.flatnonzero(parity == p) for p in (0, 1)]
     bonds = np.concatenate(bonds) if bonds else np.zeros((0, 2), np.int64)
-    n_sites = len(cells) * n_basis
+    n_sites = len(numbers) * n_basis
     shape = tuple(size) + ((n_basis,) if n_basis > 1 else ())
-    try:
-        bonds = check_bonds(n_sites, bonds)
-        short = periodic and any(np.any(np.abs(np.array(o)) >= lengths) for _, _, o in bond_types)
-        if short:
-            raise InputError("")
-    except InputError:
-        need = 3 if n_basis == 1 else 2
-        raise InputError(f"a periodic {name} lattice needs at least {need} cells per axis (fewer would join a site "
-                         f"to itself or repeat a bond), got size {'x'.join(map(str, size))}; use periodic=False "
-                         "or a larger size") from None
     colours = tuple(np.asarray(g, dtype=np.int64) for g in groups if len(g))
     if not is_proper(n_sites, bonds, colours):  # a periodic odd length: Δ + 1 colours
         colours = misra_gries(n_sites, bonds)

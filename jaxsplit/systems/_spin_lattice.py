@@ -364,16 +364,19 @@ class SpinLattice(AbstractSystem):
             return None
         if not _present(self.exchange):
             return None
-        # the colours are the (axis, parity) matchings, in that order (``lattices._lattices``)
+        # the colours are the (axis, parity) matchings, in that order (``lattices._lattices``): each
+        # bond of colour c must join a site to its partner along the axis (a partner map, no sort)
+        if len(lat.colours) != 2 * len(lat.size):
+            return None
         sites = np.arange(lat.n_sites).reshape(lat.size)
+        partner = np.empty(lat.n_sites, np.int64)
         for c, colour in enumerate(lat.colours):
             axis, parity = divmod(c, 2)
-            first = np.take(sites, np.arange(parity, lat.size[axis], 2), axis=axis)
-            second = np.take(sites, (np.arange(parity, lat.size[axis], 2) + 1) % lat.size[axis], axis=axis)
-            want = np.sort(np.stack([first.ravel(), second.ravel()], axis=1), axis=1)
-            got = np.sort(lat.bonds[colour], axis=1)
-            if len(lat.colours) != 2 * len(lat.size) or not np.array_equal(want[np.lexsort(want.T[::-1])],
-                                                                          got[np.lexsort(got.T[::-1])]):
+            first = np.take(sites, np.arange(parity, lat.size[axis], 2), axis=axis).ravel()
+            second = np.take(sites, (np.arange(parity, lat.size[axis], 2) + 1) % lat.size[axis], axis=axis).ravel()
+            partner[first], partner[second] = second, first
+            pairs = lat.bonds[colour]
+            if len(pairs) != len(first) or not np.array_equal(partner[pairs[:, 0]], pairs[:, 1]):
                 return None
         return PairLayout(tuple(lat.size))
 
