@@ -3,6 +3,8 @@ first inside jaxsplit's loops. Run here on the CPU by forcing it (``components_f
 system, output mode and adjoint gives the components-last run's numbers, and the CPU's own
 default stays components last (its select form, ``core/_loops.py``'s docstring)."""
 
+import re
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -79,20 +81,22 @@ def test_components_first_gradients_are_the_same(adjoint):
     assert float(np.max(np.abs(np.asarray(first[0]) - np.asarray(last[0])))) <= SAME * max(scale, 1.0)
 
 
-def test_components_first_moves_the_loop_state_and_not_a_laid_out_spin_state():
-    """Forced, the loop's carry is (3, B): the program holds transposes that the default has not;
-    the spin fast path's ``Components`` (already components first) gains none."""
+def test_components_first_splits_the_loop_state_and_not_a_laid_out_spin_state():
+    """Forced, the free body's loop carries one (B,) array per component (the default carries
+    (B, 3) only); the spin fast path's ``Components`` (already components first, (3, 4, 4))
+    is carried as it is, never as rows of its (16, 3) user state."""
     free = CASES["free body"][0]()
     spins, s0 = CASES["spin lattice"][0](), CASES["spin lattice"][1]
 
-    def count(step, x):
-        return str(jax.make_jaxpr(lambda y: jaxsplit.integrate(step, y, 0.05, 9).final)(x)).count("transpose")
+    def program(step, x):
+        return str(jax.make_jaxpr(lambda y: jaxsplit.integrate(step, y, 0.05, 9).final)(x))
 
     jax.clear_caches()
-    plain = count(free, M), count(spins, s0)
-    jax.clear_caches()
+    plain = program(free, M)
     with components_first():
-        forced = count(free, M), count(spins, s0)
+        jax.clear_caches()
+        forced, spin = program(free, M), program(spins, s0)
     jax.clear_caches()
-    assert forced[0] > plain[0]
-    assert forced[1] == plain[1]
+    rows = re.compile(r"\w+:f64\[5\] \w+:f64\[5\] \w+:f64\[5\]")  # a loop body's three component arguments
+    assert rows.search(forced) and not rows.search(plain)
+    assert "f64[3,4,4]" in spin and not re.search(r"\w+:f64\[16\] \w+:f64\[16\] \w+:f64\[16\]", spin)

@@ -21,9 +21,9 @@ where that is faster (``_one_kernel``).
 On an accelerator both CPU devices fail: the select form leaves each rotation as two kernels
 (its components, then the select that writes them back into the (B, 3) array), and a
 components-last batch is read with a stride of three. There ``threaded`` carries the state
-components first (every array leaf's last axis moved to the front, ``laid_out``), so that a
-flow's components are contiguous rows and XLA fuses a step into one elementwise kernel; the
-body still sees components last (the moves cancel inside the loop). Measured on an H200
+components first (every batched array leaf as one array per component, ``laid_out``), so that
+a flow's components are contiguous arrays and XLA fuses a step into one elementwise kernel;
+the body still sees components last (a ``stack`` whose slices XLA folds away). Measured on an H200
 (``benchmarks/results/throughput-gpu.md``): Strang on 10⁶ free bodies ran 4.4× slower than a
 hand-fused loop over three component arrays with the CPU's form.
 """
@@ -79,14 +79,28 @@ def laid_out() -> bool:
     return jax.default_backend() != "cpu" if first is None else first
 
 
-def _move(tree, source: int, destination: int):
-    """Every array leaf of ``tree`` with a batch (two axes or more) with axis ``source`` moved to
-    ``destination``; a state module (``eqx.Module``: the spin lattices' ``Components``) lays
-    itself out and is passed through."""
-    def move(a):
-        return jnp.moveaxis(a, source, destination) if not isinstance(a, eqx.Module) and jnp.ndim(a) >= 2 else a
+class _Rows(eqx.Module):
+    """A batched leaf carried as its components, one array each (``laid_out``)."""
 
-    return jax.tree.map(move, tree, is_leaf=lambda a: isinstance(a, eqx.Module))
+    rows: tuple
+
+
+def _split(tree):
+    """Every array leaf of ``tree`` with a batch (two axes or more) as ``_Rows`` of its last
+    axis; a state module (``eqx.Module``: the spin lattices' ``Components``) lays itself out
+    and is passed through."""
+    def split(a):
+        if isinstance(a, eqx.Module) or jnp.ndim(a) < 2:
+            return a
+        return _Rows(tuple(a[..., k] for k in range(jnp.shape(a)[-1])))
+
+    return jax.tree.map(split, tree, is_leaf=lambda a: isinstance(a, eqx.Module))
+
+
+def _join(tree):
+    """``_split``'s inverse (also for kept carries, which have a leading axis more)."""
+    return jax.tree.map(lambda a: jnp.stack(a.rows, axis=-1) if isinstance(a, _Rows) else a, tree,
+                        is_leaf=lambda a: isinstance(a, _Rows))
 
 
 def threaded(body, carry, invariants, n, one_call: bool = True, keep: bool = False, xs=None, reverse: bool = False):
@@ -102,21 +116,18 @@ def threaded(body, carry, invariants, n, one_call: bool = True, keep: bool = Fal
     arrays, rest = eqx.partition(invariants, eqx.is_array)
     if not laid_out():
         return _threaded(body, carry, arrays, rest, n, one_call, keep, xs, reverse, False)
-    out = _threaded(body, _move(carry, -1, 0), arrays, rest, n, one_call, keep, xs, reverse, True)
-    if keep:  # kept carries (n, k, ...) of leaves (k, ...): back to (n, ..., k)
-        return _move(out[0], 0, -1), _move(out[1], 1, -1)
-    return _move(out, 0, -1)
+    return _join(_threaded(body, _split(carry), arrays, rest, n, one_call, keep, xs, reverse, True))
 
 
 def _threaded(body, carry, arrays, rest, n, one_call, keep, xs, reverse, first):
     def through(c, *x):
         state, inv = c
         if first:
-            state = _move(state, 0, -1)
+            state = _join(state)
         with _switched_on(_SELECTS) if not (_PLAIN.get() or first) else contextlib.nullcontext():
             state = body(state, eqx.combine(inv, rest), *x)
         if first:
-            state = _move(state, -1, 0)
+            state = _split(state)
         return jax.lax.optimization_barrier((state, inv))
 
     run = one_kernel if one_call else (lambda loop, *args, kept=False: loop(*args))
