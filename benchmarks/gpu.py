@@ -35,11 +35,11 @@ import jax.numpy as jnp
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import header, log, machine_info, write  # noqa: E402
-from _spin_kernels import fused_run  # noqa: E402
-from spin_scale import H, STATE_BYTES, SUB_FLOWS, build  # noqa: E402
+from _common import header, log, machine_info, write
+from _spin_kernels import fused_run
+from spin_scale import STATE_BYTES, SUB_FLOWS, H, build
 
-import jaxsplit  # noqa: E402
+import jaxsplit
 
 STEPS = {100: 40, 216: 20, 464: 10}
 
@@ -62,15 +62,15 @@ def copy_bandwidth(n=2**27):
 
 def spin_row(size: int, bw: float) -> dict:
     t = time.perf_counter()
-    system, step, s0 = build((size,) * 3)
+    _, step, s0 = build((size,) * 3)
     built = time.perf_counter() - t
     n = STEPS.get(size, 10)
     x = jnp.asarray(s0)
     cube = jnp.asarray(np.ascontiguousarray(s0.T).reshape(3, size, size, size))
     del s0
     fused = fused_run(1.0, H)
-    ours = lambda: jaxsplit.integrate(step, x, H, n).final.block_until_ready()  # noqa: E731
-    theirs = lambda: fused(cube, H, n).block_until_ready()  # noqa: E731
+    ours = lambda: jaxsplit.integrate(step, x, H, n).final.block_until_ready()
+    theirs = lambda: fused(cube, H, n).block_until_ready()
     t = time.perf_counter()
     got = ours()
     first = time.perf_counter() - t
@@ -116,11 +116,11 @@ def main(argv=None):
 
     def record():
         lines = header(out, "Spin lattices on an accelerator (`benchmarks/gpu.py`)")
-        lines += [f"Devices: {', '.join(out['devices'])}. Copy bandwidth (XLA 2·x, 1 GiB, read + write): "
+        lines += [(f"Devices: {', '.join(out['devices'])}. Copy bandwidth (XLA 2·x, 1 GiB, read + write): "
                   f"{bw / 1e9:.0f} GB/s. Simple-cubic Heisenberg, Strang over the bond colours, float64, h = {H}; "
-                  "wall time, best of 3 interleaved rounds.", "",
-                  "| N spins | steps | host build (s) | first call (s) | jaxsplit spin-steps/s | hand-fused JAX | "
-                  "hand-fused / jaxsplit | max diff | fraction of the per-flow bound | one-pass bound |",
+                  "wall time, best of 3 interleaved rounds."), "",
+                  ("| N spins | steps | host build (s) | first call (s) | jaxsplit spin-steps/s | hand-fused JAX | "
+                  "hand-fused / jaxsplit | max diff | fraction of the per-flow bound | one-pass bound |"),
                   "|---|---|---|---|---|---|---|---|---|---|"]
         for r in out["spins"]:
             lines.append(f"| {r['n_spins']:,} | {r['steps']} | {r['host_build_s']:.1f} | {r['first_call_s']:.1f} | "

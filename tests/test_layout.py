@@ -1,9 +1,8 @@
-"""The loop layout an accelerator uses (``core._loops.laid_out``): states carried components
-first inside jaxsplit's loops. Run here on the CPU by forcing it (``components_first``): every
-system, output mode and adjoint gives the components-last run's numbers, and the CPU's own
-default stays components last (its select form, ``core/_loops.py``'s docstring)."""
+"""The rotation form an accelerator's loops use (``core._loops.select_form``): the stack form,
+where the CPU's loops use the select form. Run here on the CPU by forcing it: every system,
+output mode and adjoint gives the same numbers in both forms, and the forced program holds
+no select in its loop (``core/_loops.py``'s docstring says why the forms differ)."""
 
-import re
 
 import jax
 import jax.numpy as jnp
@@ -11,9 +10,9 @@ import numpy as np
 import pytest
 
 import jaxsplit
-from jaxsplit.core._loops import components_first, laid_out
+from jaxsplit.core._loops import _selecting, select_form
 
-SAME = 1e-13  # the two layouts run the same arithmetic; only the fused-multiply-add choices may differ
+SAME = 1e-13  # the two forms run the same arithmetic; only the fused-multiply-add choices may differ
 
 rng = np.random.default_rng(7)
 M = jnp.asarray(rng.standard_normal((5, 3)))
@@ -34,27 +33,27 @@ CASES = {
 
 
 def _both(fn):
-    """``fn()`` components last and components first, each traced afresh (the layout is read
-    while tracing, so cached programs must not be reused)."""
+    """``fn()`` with the select form and with the stack form, each traced afresh (the form is
+    read while tracing, so cached programs must not be reused)."""
     out = []
-    for first in (False, True):
+    for form in (True, False):
         jax.clear_caches()
-        with components_first(first):
+        with select_form(form):
             out.append(jax.tree.leaves(jax.block_until_ready(fn())))
     jax.clear_caches()
     return out
 
 
-def test_the_cpu_carries_components_last_by_default():
-    assert jax.default_backend() != "cpu" or laid_out() is False
-    with components_first():
-        assert laid_out() is True
-    with components_first(False):
-        assert laid_out() is False
+def test_the_cpu_uses_the_select_form_and_an_accelerator_the_stack_form():
+    assert _selecting() is (jax.default_backend() == "cpu")
+    with select_form():
+        assert _selecting() is True
+    with select_form(False):
+        assert _selecting() is False
 
 
 @pytest.mark.parametrize("system", list(CASES))
-def test_components_first_runs_give_the_same_numbers(system):
+def test_both_forms_give_the_same_numbers(system):
     build, x0 = CASES[system]
     step = build()
     ts = jnp.linspace(0.0, 0.7, 4)
@@ -65,38 +64,51 @@ def test_components_first_runs_give_the_same_numbers(system):
                jax.jit(jax.vmap(lambda x: jaxsplit.integrate(step, x, 0.05, 9).final))(batch))
         return out + ((jaxsplit.integrate(step, x0, 0.05, ts=ts).x,) if system == "free body" else ())
 
-    last, first = _both(runs)
-    assert [a.shape for a in first] == [a.shape for a in last]
-    assert max(float(np.max(np.abs(np.asarray(a) - np.asarray(b))))for a, b in zip(first, last)) <= SAME
+    select, stack = _both(runs)
+    assert [a.shape for a in stack] == [a.shape for a in select]
+    assert max(float(np.max(np.abs(np.asarray(a) - np.asarray(b)))) for a, b in zip(stack, select)) <= SAME
 
 
 @pytest.mark.parametrize("adjoint", ["store", "reversible"])
-def test_components_first_gradients_are_the_same(adjoint):
+def test_both_forms_give_the_same_gradients(adjoint):
     def loss(inertia):
         step = jaxsplit.splitting(jaxsplit.RigidBody(inertia), "strang", "casimir", shift=1)
         return jnp.sum(jaxsplit.integrate(step, M, 0.05, 40, adjoint=adjoint).final[:, 0] ** 2)
 
-    last, first = _both(lambda: jax.jit(jax.grad(loss))(INERTIA))
-    scale = float(np.max(np.abs(np.asarray(last[0]))))
-    assert float(np.max(np.abs(np.asarray(first[0]) - np.asarray(last[0])))) <= SAME * max(scale, 1.0)
+    select, stack = _both(lambda: jax.jit(jax.grad(loss))(INERTIA))
+    scale = float(np.max(np.abs(np.asarray(select[0]))))
+    assert float(np.max(np.abs(np.asarray(stack[0]) - np.asarray(select[0])))) <= SAME * max(scale, 1.0)
 
 
-def test_components_first_splits_the_loop_state_and_not_a_laid_out_spin_state():
-    """Forced, the free body's loop carries one (B,) array per component (the default carries
-    (B, 3) only); the spin fast path's ``Components`` (already components first, (3, 4, 4))
-    is carried as it is, never as rows of its (16, 3) user state."""
-    free = CASES["free body"][0]()
-    spins, s0 = CASES["spin lattice"][0](), CASES["spin lattice"][1]
+def test_each_form_writes_the_components_its_way_in_the_loop():
+    """The loop bodies of the free body's program: components written by selects with the select
+    form (the CPU's default), by concatenates with the stack form (the accelerator's)."""
+    step = CASES["free body"][0]()
 
-    def program(step, x):
-        return str(jax.make_jaxpr(lambda y: jaxsplit.integrate(step, y, 0.05, 9).final)(x))
-
-    jax.clear_caches()
-    plain = program(free, M)
-    with components_first():
+    def loop_selects(form):
         jax.clear_caches()
-        forced, spin = program(free, M), program(spins, s0)
-    jax.clear_caches()
-    rows = re.compile(r"\w+:f64\[5\] \w+:f64\[5\] \w+:f64\[5\]")  # a loop body's three component arguments
-    assert rows.search(forced) and not rows.search(plain)
-    assert "f64[3,4,4]" in spin and not re.search(r"\w+:f64\[16\] \w+:f64\[16\] \w+:f64\[16\]", spin)
+        with select_form(form):
+            closed = jax.make_jaxpr(lambda y: jaxsplit.integrate(step, y, 0.05, 9).final)(M)
+        jax.clear_caches()
+        counts = {"select_n": 0, "concatenate": 0, "stack": 0, "loops": 0}  # jnp.stack: either primitive
+
+        def walk(jaxpr, in_loop):
+            for eqn in jaxpr.eqns:
+                looping = in_loop or eqn.primitive.name in ("scan", "while")
+                counts["loops"] += eqn.primitive.name in ("scan", "while")
+                if in_loop and eqn.primitive.name in counts:
+                    counts[eqn.primitive.name] += 1
+                for value in eqn.params.values():
+                    for sub in value if isinstance(value, (tuple, list)) else (value,):
+                        sub = getattr(sub, "jaxpr", sub)
+                        if hasattr(sub, "eqns"):
+                            walk(sub, looping)
+
+        walk(closed.jaxpr, False)
+        return counts
+
+    select, stack = loop_selects(True), loop_selects(False)
+    assert select["loops"] and stack["loops"]
+    # the select form writes a rotation's components by selects; the stack form by concatenates
+    assert select["concatenate"] + select["stack"] == 0 and stack["concatenate"] + stack["stack"] > 0
+    assert select["select_n"] > stack["select_n"]

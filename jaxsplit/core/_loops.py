@@ -18,14 +18,14 @@ output at given times ran 19× slower), so nothing in the loop's state is unchan
 ``threaded`` also runs its loop through ``one_kernel``: a call XLA compiles as one CPU kernel
 where that is faster (``_one_kernel``).
 
-On an accelerator both CPU devices fail: the select form leaves each rotation as two kernels
-(its components, then the select that writes them back into the (B, 3) array), and a
-components-last batch is read with a stride of three. There ``threaded`` carries the state
-components first (every batched array leaf as one array per component, ``laid_out``), so that
-a flow's components are contiguous arrays and XLA fuses a step into one elementwise kernel;
-the body still sees components last (a ``stack`` whose slices XLA folds away). Measured on an H200
-(``benchmarks/results/throughput-gpu.md``): Strang on 10⁶ free bodies ran 4.4× slower than a
-hand-fused loop over three component arrays with the CPU's form.
+On an accelerator the select form is slower: XLA's GPU compiler leaves each rotation as two
+kernels there (its components, then the select that writes them back into the (B, 3) array).
+Loops use the stack form on every backend but the CPU (``select_form``). Measured on an H200
+(``benchmarks/results/gpu_layout-gpu.md``, Strang, 10⁶ free bodies, 2,000 steps, under
+``jit(vmap)``): 1.15e4 million body-steps/s with the select form, 4.1e4 with the stack form,
+against 9.0e4 for a hand-fused loop over three component arrays. Carrying the loop's state
+as one array per component was slower (2.0e4 for the direct call), and a transposed (3, B)
+carry too (``throughput-gpu-7ae3756.md``).
 """
 
 import contextlib
@@ -41,7 +41,7 @@ from ._one_kernel import one_kernel, one_kernel_jvp
 
 _SELECTS = contextvars.ContextVar("jaxsplit_selects", default=False)
 _PLAIN = contextvars.ContextVar("jaxsplit_plain_loops", default=False)
-_FIRST = contextvars.ContextVar("jaxsplit_components_first", default=None)
+_FORM = contextvars.ContextVar("jaxsplit_select_form", default=None)
 
 
 @contextlib.contextmanager
@@ -67,67 +67,35 @@ def plain_loops():
     return _switched_on(_PLAIN)
 
 
-def components_first(on: bool = True):
-    """Loops traced inside carry their state components first (``True``) or components last
-    (``False``) whatever the backend; by default, components first on an accelerator only."""
-    return _set(_FIRST, on)
+def select_form(on: bool = True):
+    """Rotations traced inside jaxsplit's loops use the select form (``True``) or the stack form
+    (``False``) whatever the backend; by default the select form on the CPU only (the module
+    docstring)."""
+    return _set(_FORM, on)
 
 
-def laid_out() -> bool:
-    """Whether ``threaded`` carries its state components first (the module docstring)."""
-    first = _FIRST.get()
-    return jax.default_backend() != "cpu" if first is None else first
-
-
-class _Rows(eqx.Module):
-    """A batched leaf carried as its components, one array each (``laid_out``)."""
-
-    rows: tuple
-
-
-def _split(tree):
-    """Every array leaf of ``tree`` with a batch (two axes or more) as ``_Rows`` of its last
-    axis; a state module (``eqx.Module``: the spin lattices' ``Components``) lays itself out
-    and is passed through."""
-    def split(a):
-        if isinstance(a, eqx.Module) or jnp.ndim(a) < 2:
-            return a
-        return _Rows(tuple(a[..., k] for k in range(jnp.shape(a)[-1])))
-
-    return jax.tree.map(split, tree, is_leaf=lambda a: isinstance(a, eqx.Module))
-
-
-def _join(tree):
-    """``_split``'s inverse (also for kept carries, which have a leading axis more)."""
-    return jax.tree.map(lambda a: jnp.stack(a.rows, axis=-1) if isinstance(a, _Rows) else a, tree,
-                        is_leaf=lambda a: isinstance(a, _Rows))
+def _selecting() -> bool:
+    form = _FORM.get()
+    return jax.default_backend() == "cpu" if form is None else form
 
 
 def threaded(body, carry, invariants, n, one_call: bool = True, keep: bool = False, xs=None, reverse: bool = False):
     """``n`` times ``carry = body(carry, invariants)``: a ``lax.scan`` (Python int ``n``) or a
     ``while_loop`` (traced ``n``), the array leaves of ``invariants`` (and a traced bound)
     carried through an optimization barrier with ``carry`` (the module docstring says why),
-    the body traced with the select form on; through ``one_kernel`` unless ``plain_loops`` or
+    the body traced with the select form on the CPU (``select_form``); through ``one_kernel`` unless ``plain_loops`` or
     ``one_call`` is False (a loop nested in another's kernel).
 
     For a Python int ``n`` only: ``keep`` returns (carry, the carries after each iteration
     stacked); ``xs`` (leading axis ``n``) gives iteration k its slice, ``body(carry, invariants,
     x_k)``; ``reverse`` runs the iterations from the last slice to the first."""
     arrays, rest = eqx.partition(invariants, eqx.is_array)
-    if not laid_out():
-        return _threaded(body, carry, arrays, rest, n, one_call, keep, xs, reverse, False)
-    return _join(_threaded(body, _split(carry), arrays, rest, n, one_call, keep, xs, reverse, True))
+    selecting = _selecting() and not _PLAIN.get()
 
-
-def _threaded(body, carry, arrays, rest, n, one_call, keep, xs, reverse, first):
     def through(c, *x):
         state, inv = c
-        if first:
-            state = _join(state)
-        with _switched_on(_SELECTS) if not (_PLAIN.get() or first) else contextlib.nullcontext():
+        with _switched_on(_SELECTS) if selecting else contextlib.nullcontext():
             state = body(state, eqx.combine(inv, rest), *x)
-        if first:
-            state = _split(state)
         return jax.lax.optimization_barrier((state, inv))
 
     run = one_kernel if one_call else (lambda loop, *args, kept=False: loop(*args))

@@ -76,7 +76,7 @@ def simple(bond_types, lengths, periodic: bool) -> bool:
     offsets are distinct and nonzero, so the graph is simple whenever a bond fits in the box."""
     if not periodic:
         return True
-    wrap = lambda o: tuple(np.mod(np.asarray(o), lengths))  # noqa: E731
+    wrap = lambda o: tuple(np.mod(np.asarray(o), lengths))
     for t, (a, b, o) in enumerate(bond_types):
         if a == b and (not any(wrap(o)) or not any(wrap(2 * np.asarray(o)))):
             return False
