@@ -123,7 +123,12 @@ class PairExchange(AbstractFlow):
         tier = sum((bound > limit).astype(jnp.int32) for limit in TIERS)
         # one kernel per flow: XLA evaluates the coefficients again for each of a pair's six new
         # components; computing them once in the switch and turning the ends after it (three
-        # kernels more, 96 instead of 48 B/spin moved) measured no faster (spins-profile.md)
+        # kernels more, 96 instead of 48 B/spin moved) measured no faster (spins-profile.md); again
+        # on 2026-11-27 with (U, V) = (−2A, 2B) out of the switch: XLA's CPU fusion splits the turn
+        # into several kernels and was ~3.5× slower. XLA's CPU pipeline forms no multi-output
+        # fusions (six separate outputs gave nine kernels, the coefficients again per output),
+        # and neither a concatenate (jnp.roll) nor a pad/select roll fuses into the kernel: parity 1
+        # keeps its two roll passes (a pad/select roll along the last axis was 2× slower).
         branches = [functools.partial(_kernel, d=len(self.shape), axis=self.axis, parity=self.parity, limit=limit)
                     for limit in TIERS + (None,)]
         return Components(jax.lax.switch(tier, branches, x, jt))
