@@ -146,6 +146,7 @@ _reversible.defvjp(_reversible_fwd, _reversible_bwd)
 
 # ------------------------------------------------------------------ the stored adjoint, retraced
 STORE_RETRACED = "store, retraced"
+KEEP_EVERY = 16
 
 
 def retraceable(step) -> bool:
@@ -170,20 +171,20 @@ def advance_stored_retraced(step, x, h, n: int):
     state: no round-off carried between steps). Used for ``"store"`` under reverse mode only:
     a ``jax.custom_vjp`` has no forward mode."""
     parameters, static = split_parameters(step)
-    return _stored(static, n, parameters, x, h)
+    return _stored(static, n, KEEP_EVERY, parameters, x, h)
 
 
-@functools.partial(jax.custom_vjp, nondiff_argnums=(0, 1))
-def _stored(static, n, parameters, x, h):
+@functools.partial(jax.custom_vjp, nondiff_argnums=(0, 1, 2))
+def _stored(static, n, every, parameters, x, h):
     return advance_stored(join_parameters(parameters, static), x, h, n)
 
 
-def _stored_fwd(static, n, parameters, x, h):
-    y, kept = join_parameters(parameters, static).advance(x, h, n, keep=True)
+def _stored_fwd(static, n, every, parameters, x, h):
+    y, kept = join_parameters(parameters, static).advance(x, h, n, keep=every)
     return y, (parameters, y, kept, h)
 
 
-def _stored_bwd(static, n, residuals, ct_y):
+def _stored_bwd(static, n, every, residuals, ct_y):
     parameters, y, kept, h = residuals
     _, ct_x, ct_parameters, ct_h = join_parameters(parameters, static).retrace(y, h, n, ct_y, kept=kept)
     return ct_parameters, ct_x, ct_h
