@@ -392,9 +392,10 @@ class Composition(AbstractFlow):
         reversible flows (φ_{−t} = φ_t⁻¹), not a symmetric scheme: the word is inverted
         sub-flow by sub-flow.
 
-        ``kept`` (``advance(..., keep=True)``'s trajectory, for a Python int ``n`` ≥ 2): the
-        walk restarts each step from the kept state instead of the rebuilt one, so round-off
-        does not accumulate over the steps (the stored adjoint's backward pass)."""
+        ``kept`` (``advance(..., keep=k)``'s kept states, for a Python int ``n`` ≥ 2): the walk
+        restarts from each kept state instead of the rebuilt one, so round-off accumulates over
+        one block of steps (``kept_blocks``, read from the number kept), not over the run (the
+        stored adjoint's backward pass)."""
         with self._loops():
             return self._retrace(x_after, h, n, ct_after, kept)
 
@@ -467,12 +468,13 @@ class Composition(AbstractFlow):
                          for f, (dp, _) in zip(self.flows, acc) for entry, p in zip(dp, split_parameters(f)[0])]
         return x, ct, ct_parameters, sum(jnp.sum(dt) for _, dt in acc).astype(h.dtype)
 
-    def advance(self, state, h, n, keep: bool = False):
+    def advance(self, state, h, n, keep: int = 0):
         """``n`` steps, merging the last sub-flow of each step with the first of the next.
 
         ``n`` is a Python int (a ``lax.scan``) or a traced integer (a ``fori_loop``). ``keep``
-        (Python int ``n`` ≥ 2, not differentiable): (state, the loop's state after each
-        step stacked), the trajectory ``retrace(..., kept=)`` restarts from.
+        = k ≥ 1 (Python int ``n`` ≥ 2, not differentiable): (state, the loop's state kept
+        about every k steps, stacked: ⌊n/k⌋ of them, laid out by ``kept_blocks``; k = 1 (or
+        True) every step's), what ``retrace(..., kept=)`` restarts from.
         """
         with self._loops():
             return self._advance(state, h, n, keep)
