@@ -1,7 +1,7 @@
 """What does a gradient through n steps cost in memory and time, per adjoint?
 
-``integrate(..., adjoint=)`` with ``"store"`` (every step's state kept; under ``jax.grad``
-each step walked back from it), ``"checkpoint"``
+``integrate(..., adjoint=)`` with ``"store"`` (one state in 16 steps kept; under ``jax.grad``
+the steps walked back from each), ``"checkpoint"``
 (√n blocks) and ``"reversible"`` (states rebuilt by stepping back, fused rotation
 pullbacks) on
 
@@ -26,6 +26,10 @@ A profile splits the heavy top's backward pass by kind of flow (rotations of m a
 rotations of (m, Γ), one rotation and the kick): time per step of the forward run and of
 the backward pass (gradient minus forward).
 
+A table measures the stored adjoint keeping one state in k steps (``_adjoints.KEEP_EVERY``,
+16 in the library; k = 1 keeps every state, as before): memory, time against the forward run,
+and the gradient's difference from keeping every state and from the differentiated scan.
+
 A last table answers which gradient ``fit`` should use: its model (200 observation
 intervals of 2 Kahan–Li 6 steps each) with the per-interval checkpoint and rolled word it
 uses, against the unrolled word with each adjoint per interval: time per loss gradient and
@@ -49,6 +53,7 @@ import numpy as np
 from _common import finish, header, interleaved, log, machine_info
 
 import jaxsplit
+from jaxsplit.core import _adjoints
 from jaxsplit.core._adjoints import advance
 from jaxsplit.core._compose import roll
 from jaxsplit.explore._fit_inertia import _body
@@ -150,6 +155,45 @@ def time_ratios(system, n, repeats):
     for adjoint in ADJOINTS + (SCAN,):
         out[adjoint] = statistics.median(a / f for a, f in zip(times[adjoint], times["forward"]))
     return out
+
+
+# ------------------------------------------------------------------ the stored adjoint's interval
+KEEP_EVERY = (1, 4, 16, 64)
+
+
+def keep_every(system, n, repeats):
+    """The stored gradient keeping one state in k steps, for each k of ``KEEP_EVERY``: memory,
+    time / forward (``repeats`` rounds; none: not timed), relative difference from k = 1 and
+    from the differentiated scan. ``integrate``'s jit traced the stored adjoint with the
+    library's interval: its caches are cleared for each k (the programs are compiled ahead)."""
+    loss, args = SYSTEMS[system]()
+    argnums = tuple(range(len(args)))
+    forward = jax.jit(loss("store", n)).lower(*args).compile()
+    scan = jax.jit(jax.grad(jax.jit(loss("store", n)), argnums=argnums))(*args)
+    cases, rows, grads = {"forward": lambda: jax.block_until_ready(forward(*args))}, [], {}
+    default = _adjoints.KEEP_EVERY
+    try:
+        for k in KEEP_EVERY:
+            _adjoints.KEEP_EVERY = k
+            jax.clear_caches()
+            fn = gradient(loss, "store", n, args).lower(*args).compile()
+            grads[k] = fn(*args)
+            rows.append({"system": system, "n_steps": n, "keep_every": k,
+                         "temp_bytes": int(fn.memory_analysis().temp_size_in_bytes),
+                         "vs_every_state": relative(grads[k], grads[1]), "vs_scan": relative(grads[k], scan)})
+            cases[k] = lambda fn=fn: jax.block_until_ready(fn(*args))
+    finally:
+        _adjoints.KEEP_EVERY = default
+        jax.clear_caches()
+    if repeats:
+        log(f"{system}: timing the stored adjoint's interval at {n} steps")
+        for fn in cases.values():
+            fn()
+        times = interleaved(cases, repeats, clock=time.process_time)
+        for row in rows:
+            row["time_vs_forward"] = statistics.median(
+                a / f for a, f in zip(times[row["keep_every"]], times["forward"]))
+    return rows
 
 
 # ------------------------------------------------------------------ profile of the top
@@ -257,9 +301,12 @@ def main(argv=None):
         rows += memory_and_agreement(system, counts, timed)
     ratios = [time_ratios(system, timed, repeats) for system in ("free body", "Lagrange top")]
     ratios.append(time_ratios("Lagrange top, 10³ at once", timed // 100, repeats))
+    interval_rows = (keep_every("Lagrange top, 10³ at once", timed // 100, repeats)
+                     + keep_every("free body", timed, repeats)
+                     + keep_every("asymmetric top (chaotic)", counts[1], 0))
     profile_rows = profile(timed, repeats)
     fit_rows = fit_timing(3 if quick else 7)
-    out.update(rows=rows, time_vs_forward=ratios, profile=profile_rows, fit=fit_rows)
+    out.update(rows=rows, time_vs_forward=ratios, keep_every=interval_rows, profile=profile_rows, fit=fit_rows)
 
     lines = header(out, "Gradients through n steps (`benchmarks/gradients.py`)")
     lines += [("XLA temporary memory of the compiled gradient (MiB); where run, the largest gradient entry and the "
@@ -277,6 +324,17 @@ def main(argv=None):
     for r in ratios:
         lines.append(f"| {r['system']} | {r['n_steps']:,} | {r['forward_s'] * 1e3:.3g} ms | "
                      + " | ".join(f"{r[a]:.2f}×" for a in ADJOINTS + (SCAN,)) + " |")
+    lines += ["", (f"The stored adjoint keeping one state in k steps (the library keeps one in "
+                   f"{_adjoints.KEEP_EVERY}; k = 1: every state): XLA temporary memory of the compiled gradient, "
+                   f"CPU time of one gradient / one forward run (median of {repeats} interleaved rounds), and the "
+                   "largest relative difference from keeping every state and from the differentiated scan "
+                   "(`grad(jit(loss))`)."), "",
+              "| system | steps | k | memory (MiB) | gradient / forward | vs every state | vs the scan |",
+              "|---|---|---|---|---|---|---|"]
+    for r in interval_rows:
+        timed_k = f"{r['time_vs_forward']:.2f}×" if "time_vs_forward" in r else "—"
+        lines.append(f"| {r['system']} | {r['n_steps']:,} | {r['keep_every']} | {r['temp_bytes'] / 2**20:.3g} | "
+                     f"{timed_k} | {r['vs_every_state']:.1e} | {r['vs_scan']:.1e} |")
     lines += ["", (f"Profile of one top, Strang over the flows named, {timed:,} steps (ns per step; backward = gradient "
               "− forward):"), "", "| flows | forward | backward | gradient / forward |", "|---|---|---|---|"]
     for r in profile_rows:

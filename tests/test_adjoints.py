@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 
 import jaxsplit
+from jaxsplit.core import _adjoints
+from jaxsplit.core._compose import kept_blocks
 from jaxsplit.core._flows import split_parameters, sum_to_shape
 
 GRADIENT_RTOL = 1e-8  # reversible vs stored gradient (round-off of the rebuilt states)
@@ -63,6 +65,10 @@ def test_heavy_top_like_memory_does_not_grow_with_the_step_count(top_gradients):
     sizes = {key: compiled.memory_analysis().temp_size_in_bytes for key, compiled in top_gradients.items()}
     assert sizes["reversible", LONG] == sizes["reversible", SHORT]
     assert sizes["store", LONG] > 50 * sizes["store", SHORT]
+    # "store" keeps one state in KEEP_EVERY: its memory is those states (6 float64 each) and a
+    # few KiB; keeping every state would take KEEP_EVERY times as much
+    kept = LONG // _adjoints.KEEP_EVERY * 6 * 8
+    assert kept < sizes["store", LONG] < kept + 2**14
 
 
 def _normal(shape, seed):
@@ -182,7 +188,8 @@ def test_every_adjoint_takes_a_state_of_mixed_dtypes(layout):
 
 
 # ------------------------------------------------------------------ the stored adjoint, retraced
-STORED_VS_FORWARD = 1e-10  # stored (kept states walked back a step each) vs forward-mode, 500 steps
+STORED_VS_FORWARD = 1e-10  # stored (walked back from every 16th state) vs forward-mode, 500 steps
+KEPT_ROUNDOFF = 1e-13  # walked back from every k-th kept state vs from every state (round-off of < 2k steps)
 RETRACED_STEPS = 500  # a count no other test compiles (``_retraced`` must trace afresh)
 
 
@@ -198,8 +205,8 @@ def _retraced(fn, *args) -> bool:
 
 
 def test_the_stored_gradient_walks_back_from_kept_states_and_matches_forward_mode():
-    """Under reverse mode, "store" keeps every step's state and walks each step back from it
-    with the flows' fused pullbacks; forward mode (jacfwd, its own differentiated scan) is an
+    """Under reverse mode, "store" keeps one state in ``KEEP_EVERY`` and walks the steps back
+    from each with the flows' fused pullbacks; forward mode (jacfwd, its own differentiated scan) is an
     independent reference, and a hessian (forward over reverse) goes through it."""
     loss = top_loss("store", RETRACED_STEPS)
     assert _retraced(jax.grad(loss), *TOP_ARGS) and not _retraced(jax.jacfwd(loss), *TOP_ARGS)
@@ -215,6 +222,50 @@ def test_the_stored_gradient_walks_back_from_kept_states_and_matches_forward_mod
 
     inertia = jnp.array([2.0, 1.0, 2 / 3])
     np.testing.assert_allclose(jax.hessian(free)(inertia), jax.jacfwd(jax.jacfwd(free))(inertia), rtol=1e-10, atol=1e-12)
+
+
+# (steps, keep every k): blocks of 17 (k = 16 does not divide 170), blocks of 7 after a rest of 2
+# steps, one block (k > n), every state (k = 1)
+KEPT_CASES = ((170, 1), (170, 16), (170, 7), (12, 1), (12, 16))
+
+
+@jax.jit
+def _kept_walks(x0, ct, inertia):
+    """{"n, k": (final state, kept states, retrace's (x0, ct_x0, ct_parameters, ct_h))} of ``advance(...,
+    keep=k)`` and ``retrace(..., kept=)`` for each (n, k) of ``KEPT_CASES``; and "one step off": the
+    walk of (170, 7) restarted from the states one step before the kept ones. One compiled program."""
+    step = top_step(inertia, TOP_ARGS[1], TOP_ARGS[2])
+    out = {}
+    for n, every in KEPT_CASES:
+        y, kept = step.advance(x0, 0.01, n, keep=every)
+        out[f"{n}, {every}"] = y, kept, step.retrace(y, 0.01, n, ct, kept=kept)
+    y, _, _ = out["170, 7"]
+    blocks, per_block, rest = kept_blocks(170, 170 // 7)
+    off = jax.tree_util.tree_map(lambda a: a[np.arange(blocks) * per_block + rest + per_block - 2], out["170, 1"][1])
+    out["one step off"] = step.retrace(y, 0.01, 170, ct, kept=off)
+    return out
+
+
+def test_walking_back_from_every_kth_kept_state_equals_walking_back_from_every_state():
+    """``advance(..., keep=k)`` keeps ⌊n/k⌋ states (``kept_blocks``: the rest steps first, then
+    blocks of ⌊n/blocks⌋ steps, each block's end kept), the same states as ``keep=1`` keeps at
+    those steps; ``retrace`` from them gives the gradient of walking back from every state to
+    round-off (the rebuilt states carry it over fewer than 2k steps; gradients through 10^4
+    steps of a chaotic top: ``benchmarks/results/gradients.md``)."""
+    x0 = (_normal((4, 3), 11), _normal((4, 3), 12))  # 4 tops
+    ct = jax.tree_util.tree_map(lambda a: jnp.cos(a) + 2, x0)
+    out = _kept_walks(x0, ct, TOP_ARGS[0])
+    for n, every in KEPT_CASES:
+        y, kept, walked = out[f"{n}, {every}"]
+        y1, kept1, walked1 = out[f"{n}, 1"]
+        blocks, per_block, rest = kept_blocks(n, max(1, n // every))
+        assert kept[0].shape[0] == blocks == max(1, n // every) and rest < every and blocks * per_block + rest == n
+        at = np.arange(blocks) * per_block + rest + per_block - 1  # the steps whose states keep=k keeps
+        assert _relative(jax.tree_util.tree_map(lambda a, at=at: a[at], kept1), kept) <= KEPT_ROUNDOFF, (n, every)
+        assert _relative(y, y1) <= KEPT_ROUNDOFF
+        assert _relative(walked, walked1) <= KEPT_ROUNDOFF, (n, every)
+    # must fail: the comparison sees a walk restarted from states one step before the kept ones
+    assert _relative(out["one step off"], out["170, 1"][2]) > KEPT_ROUNDOFF
 
 
 def test_the_stored_adjoint_is_retraced_under_a_vmap_inside_grad_and_only_for_reversible_flows():

@@ -1,11 +1,12 @@
 """How ``n`` steps are advanced, and what reverse mode stores: the three adjoints.
 
-* ``"store"`` (default): memory O(n), one state per step. Under reverse mode (``grad``,
-  ``vjp``; seen at the call, also through a ``vmap`` inside the differentiated function) a
-  Composition of reversible flows keeps every step's state and walks each step back from it
+* ``"store"`` (default): memory O(n). Under reverse mode (``grad``, ``vjp``; seen at the
+  call, also through a ``vmap`` inside the differentiated function) a Composition of
+  reversible flows keeps one state in ``KEEP_EVERY`` steps and walks the steps back from each
   with the flows' fused ``step_back`` (``advance_stored_retraced``: the reversible adjoint's
-  pass restarted at each kept state, so no round-off is carried between steps): gradients
-  2-3x the forward run (``benchmarks/results/gradients.md``). Otherwise (other steps,
+  pass restarted at each kept state, so round-off is carried over fewer than 2·KEEP_EVERY
+  steps, never over the run): gradients 2-3x the forward run
+  (``benchmarks/results/gradients.md``). Otherwise (other steps,
   forward mode, a ``grad`` outside a ``jit`` of the user's, where the call sees no reverse
   mode) the differentiated ``lax.scan``, which rematerialises its step from the stored state
   (``jax.checkpoint`` per step: stacking every intermediate instead made XLA re-evaluate the
@@ -146,6 +147,13 @@ _reversible.defvjp(_reversible_fwd, _reversible_bwd)
 
 # ------------------------------------------------------------------ the stored adjoint, retraced
 STORE_RETRACED = "store, retraced"
+# The stored adjoint keeps one state in this many steps (``Composition.advance(keep=)``). Keeping
+# every state, the forward pass wrote and the backward pass read the whole trajectory: on 10^3
+# heavy tops at once (48 MB for 10^3 steps) that was most of what the gradient cost beyond the
+# reversible one (3.13x the forward run against 2.61x); one in 16 leaves single-body runs as
+# fast and their memory 16x smaller. The gradients agree with those from every state to
+# round-off (tests/test_adjoints.py; a chaotic top over 10^4 steps: benchmarks/results/gradients.md).
+KEEP_EVERY = 16
 
 
 def retraceable(step) -> bool:
@@ -165,25 +173,25 @@ def stored_engine(adjoint: str, step, inputs) -> str:
 
 
 def advance_stored_retraced(step, x, h, n: int):
-    """``n`` steps whose VJP keeps every step's state and walks each step back from it with
-    the flows' fused ``step_back`` (the reversible adjoint's pass, restarted at every kept
-    state: no round-off carried between steps). Used for ``"store"`` under reverse mode only:
-    a ``jax.custom_vjp`` has no forward mode."""
+    """``n`` steps whose VJP keeps one state in ``KEEP_EVERY`` steps and walks the steps back
+    from each with the flows' fused ``step_back`` (the reversible adjoint's pass, restarted at
+    every kept state: round-off carried over fewer than 2·KEEP_EVERY steps). Used for
+    ``"store"`` under reverse mode only: a ``jax.custom_vjp`` has no forward mode."""
     parameters, static = split_parameters(step)
-    return _stored(static, n, parameters, x, h)
+    return _stored(static, n, KEEP_EVERY, parameters, x, h)
 
 
-@functools.partial(jax.custom_vjp, nondiff_argnums=(0, 1))
-def _stored(static, n, parameters, x, h):
+@functools.partial(jax.custom_vjp, nondiff_argnums=(0, 1, 2))
+def _stored(static, n, every, parameters, x, h):
     return advance_stored(join_parameters(parameters, static), x, h, n)
 
 
-def _stored_fwd(static, n, parameters, x, h):
-    y, kept = join_parameters(parameters, static).advance(x, h, n, keep=True)
+def _stored_fwd(static, n, every, parameters, x, h):
+    y, kept = join_parameters(parameters, static).advance(x, h, n, keep=every)
     return y, (parameters, y, kept, h)
 
 
-def _stored_bwd(static, n, residuals, ct_y):
+def _stored_bwd(static, n, every, residuals, ct_y):
     parameters, y, kept, h = residuals
     _, ct_x, ct_parameters, ct_h = join_parameters(parameters, static).retrace(y, h, n, ct_y, kept=kept)
     return ct_parameters, ct_x, ct_h
