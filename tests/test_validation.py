@@ -6,7 +6,6 @@ compilation (shape refusals while tracing); the few runs are a handful of steps.
 """
 
 import math
-import re
 import warnings
 
 import jax
