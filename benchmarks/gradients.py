@@ -69,7 +69,7 @@ def free_body():
 
     def loss(adjoint, n):
         def f(inertia, m):
-            step = jaxsplit.splitting(jaxsplit.RigidBody(inertia), "strang", "casimir", shift=1)
+            step = jaxsplit.splitting(jaxsplit.RigidBody(inertia, allow_nonphysical=True), "strang", "casimir", shift=1)
             return jnp.sum(jaxsplit.integrate(step, m, H, n, adjoint=adjoint).final * WEIGHTS)
         return f
 

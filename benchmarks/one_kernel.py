@@ -44,7 +44,7 @@ def states(b):
 
 
 def free_body(scheme, b):
-    body = jaxsplit.RigidBody(jnp.asarray(jaxsplit.STANDARD_CASE.inertia))
+    body = jaxsplit.RigidBody(jnp.asarray(jaxsplit.STANDARD_CASE.inertia), allow_nonphysical=True)
     x0, h = states(b), 0.5
     step = jaxsplit.splitting(body, scheme, "casimir")
     n = max(20, int(WORK / b / step.flows_per_step))

@@ -41,7 +41,7 @@ def main():
     n = round(T / H)
 
     def step(i):
-        return jaxsplit.splitting(jaxsplit.RigidBody(i), "kahan-li-8", "casimir", shift=1)
+        return jaxsplit.splitting(jaxsplit.RigidBody(i, allow_nonphysical=True), "kahan-li-8", "casimir", shift=1)
 
     def n_steps(i, x, adjoint="store"):
         return jaxsplit.integrate(step(i), x, H, n, adjoint=adjoint).final

@@ -39,7 +39,7 @@ def main():
             for name in SCHEMES:
                 comp = jaxsplit.splitting(system, name, split)
                 t_end = TAU[jaxsplit.schemes[name].order] / rate
-                reference = (jaxsplit.exact_solution(params, x0, t_end) if exact else
+                reference = (jaxsplit.exact_solution(system, x0, t_end) if exact else
                              jaxsplit.integrate(reference_step, x0, t_end / 400, 400).final)
                 hs, errors = jaxsplit.global_errors(jaxsplit.roll(comp, length), x0, t_end, COUNTS, reference)
                 largest = max(abs(w) for _, w in comp.word)

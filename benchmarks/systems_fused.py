@@ -311,7 +311,7 @@ def systems():
     std = jnp.asarray(jaxsplit.STANDARD_CASE.inertia)
     inertia = jnp.asarray(INERTIA)
     return {
-        "free body (Casimir split)": (jaxsplit.RigidBody(std), "casimir", "m", free_body_flows, 0.01),
+        "free body (Casimir split)": (jaxsplit.RigidBody(std, allow_nonphysical=True), "casimir", "m", free_body_flows, 0.01),
         "heavy top (axes split)": (jaxsplit.heavy_top(inertia, jnp.asarray(CHI), WEIGHT), "axes", "vector",
                                    heavy_top_flows, 0.002),
         "Lagrange top (symmetric split)": (jaxsplit.heavy_top(*(jnp.asarray(v) for v in LAGRANGE)), "symmetric",

@@ -119,7 +119,7 @@ def scipy_cases(inertia, m0, quick):
 
 
 def study(label, inertia, quick, repeats):
-    body = jaxsplit.RigidBody(jnp.asarray(inertia))
+    body = jaxsplit.RigidBody(jnp.asarray(inertia), allow_nonphysical=True)
     m0 = jnp.asarray(states())
     ref = reference(body, m0)
     cases = jaxsplit_cases(body, m0, quick) + diffrax_cases(body, m0, quick) + scipy_cases(inertia, m0, quick)

@@ -8,7 +8,7 @@ checks (``checks``) verify any map and any state; ``explore`` sweeps, maps stabi
 fits and tunes; ``paper`` audits the seed paper; ``cli`` is the command line.
 
 >>> import jax.numpy as jnp, jaxsplit
->>> body = jaxsplit.RigidBody(jnp.array([2.0, 1.0, 2.0 / 3.0]))
+>>> body = jaxsplit.STANDARD_CASE.body()    # (2, 1, 2/3): the literature's body, non-physical on purpose
 >>> step = jaxsplit.splitting(body, "kahan-li-6", split="casimir")
 >>> m10 = jaxsplit.integrate(step, jnp.array([0.45, 0.0, 0.89]), 0.1, 100)
 """

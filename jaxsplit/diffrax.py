@@ -3,7 +3,7 @@
 Optional extra (``pip install -e ".[diffrax]"``); the core package never imports it.
 
     >>> import diffrax, jax.numpy as jnp, jaxsplit, jaxsplit.diffrax as jd
-    >>> body = jaxsplit.RigidBody([2.0, 1.0, 2.0 / 3.0])
+    >>> body = jaxsplit.STANDARD_CASE.body()           # (2, 1, 2/3), non-physical on purpose
     >>> sol = diffrax.diffeqsolve(jd.term(body, split="casimir"), jd.Splitting("strang"),
     ...                           0.0, 10.0, 0.05, jnp.array([0.6, 0.0, 0.8]),
     ...                           saveat=diffrax.SaveAt(ts=jnp.linspace(0.0, 10.0, 7)))
@@ -98,7 +98,7 @@ class SplittingTerm(diffrax.AbstractTerm):
     shapes and dtypes as the state; the control is the signed interval t₁ − t₀ (a scalar).
 
     >>> import jax.numpy as jnp, jaxsplit, jaxsplit.diffrax as jd
-    >>> term = jd.term(jaxsplit.RigidBody([2.0, 1.0, 0.5]), split="axes")
+    >>> term = jd.term(jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True), split="axes")
     >>> len(term.flows), term.vf(0.0, jnp.array([0.6, 0.0, 0.8]), None).shape, term.contr(1.0, 1.5)
     (3, (3,), 0.5)
     """
@@ -124,7 +124,7 @@ def term(system, split: str | None = None, **options) -> SplittingTerm:
     e.g. ``shift=1`` for the rigid body's Casimir split (inside ``vmap`` give it explicitly).
 
     >>> import jaxsplit, jaxsplit.diffrax as jd
-    >>> t = jd.term(jaxsplit.RigidBody([2.0, 1.0, 0.5]), split="casimir", shift=1)
+    >>> t = jd.term(jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True), split="casimir", shift=1)
     >>> len(t.flows)
     2
     """
@@ -180,7 +180,7 @@ class PartialStep(diffrax.AbstractLocalInterpolation):
     times scalars, all traced.
 
     >>> import diffrax, jax.numpy as jnp, jaxsplit, jaxsplit.diffrax as jd
-    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5])
+    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True)
     >>> sol = diffrax.diffeqsolve(jd.term(body, split="casimir", shift=1), jd.Splitting("strang"), 0.0, 1.0, 0.25,
     ...                           jnp.array([0.6, 0.0, 0.8]), saveat=diffrax.SaveAt(dense=True))
     >>> m = sol.evaluate(0.4)                   # a partial step of 0.15 from the grid state at t = 0.25
@@ -268,7 +268,7 @@ class RolledSplitting(_AbstractSplitting):
     ``Splitting`` (a ``lax.switch`` per sub-flow, no merging across steps).
 
     >>> import jaxsplit, jaxsplit.diffrax as jd
-    >>> term = jd.term(jaxsplit.RigidBody([2.0, 1.0, 0.5]), split="casimir", shift=1)
+    >>> term = jd.term(jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True), split="casimir", shift=1)
     >>> jd.RolledSplitting.of("strang", term, length=4).weights.tolist()
     [0.5, 1.0, 0.5, 0.0]
     """

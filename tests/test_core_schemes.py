@@ -78,6 +78,6 @@ def test_unknown_name_suggests_the_nearest():
 
 
 def test_partitioned_scheme_refuses_three_pieces():
-    body = jaxsplit.RigidBody([2.0, 1.0, 0.5])
+    body = jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True)
     with pytest.raises(InputError, match="exactly 2 pieces"):
         jaxsplit.splitting(body, "blanes-moan-s6-prk", split="axes")

@@ -96,7 +96,8 @@ def test_the_reference_is_a_30_digit_solution():
 
 @pytest.fixture(scope="module")
 def solve():
-    return jaxsplit.exact_solution  # its numerical core is jitted: one compilation per shape
+    # its numerical core is jitted: one compilation per shape; some bodies are non-physical on purpose
+    return lambda inertia, x0, t: jaxsplit.exact_solution(jaxsplit.RigidBody(inertia, allow_nonphysical=True), x0, t)
 
 
 def test_matches_30_digits_on_every_body_and_family(solve):
@@ -232,7 +233,8 @@ def test_near_the_separatrix_the_error_is_within_the_problems_conditioning(kp2):
     delta = kp2 * 3.0 * (0.75 * 0.09 + 3.75 * 0.16) / (3.75 * 0.96)  # m3 = 0.4(1 + δ): k'² ≈ kp2
     m0 = (0.8, 0.3, 0.4 * (1 + delta))
     times = (10.0, 100.0)
-    got = np.asarray(jaxsplit.exact_solution(jnp.asarray(inertia), jnp.asarray(m0), jnp.asarray(times)))
+    got = np.asarray(jaxsplit.exact_solution(jaxsplit.RigidBody(jnp.asarray(inertia), allow_nonphysical=True),
+                                              jnp.asarray(m0), jnp.asarray(times)))
     for t, row in zip(times, got):
         ref, k2 = mp_solution(inertia, m0, t)
         assert abs(float(1 - k2) / kp2 - 1) < 0.1
@@ -278,7 +280,7 @@ def _jacobian(inertia_and_m0):
 def _perturbed(args, eps):
     """Central differences of m(7.3) in args ± eps e_k, k = 0..5: (3, 6). Twelve calls of the
     compiled scalar-time solution (shared with the other tests; a vmapped copy compiles anew)."""
-    solve = lambda a: np.asarray(jaxsplit.exact_solution(a[:3], a[3:], 7.3))
+    solve = lambda a: np.asarray(jaxsplit.exact_solution(jaxsplit.RigidBody(a[:3], allow_nonphysical=True), a[3:], 7.3))
     args = np.asarray(args)
     return np.stack([(solve(args + step) - solve(args - step)) / (2 * eps) for step in eps * np.eye(6)], axis=1)
 
@@ -303,9 +305,10 @@ def test_vmap_over_bodies_states_and_times_and_float32(solve):
     assert batched.shape == (len(BODIES), len(TIMES), 3)
     for i in range(len(BODIES)):
         np.testing.assert_allclose(batched[i], solve(inertias[i], states[i], times), atol=ROUNDOFF)
-    over_times = jax.vmap(lambda t: jaxsplit.exact_solution(inertias[0], states[0], t))(times)
+    over_times = jax.vmap(lambda t: solve(inertias[0], states[0], t))(times)
     np.testing.assert_allclose(over_times, batched[0], atol=ROUNDOFF)
-    single = jaxsplit.exact_solution(np.float32(BODIES[0][0]), np.float32(BODIES[0][1]), np.float32(10.0))
+    single = jaxsplit.exact_solution(jaxsplit.RigidBody(np.float32(BODIES[0][0]), allow_nonphysical=True),
+                                     np.float32(BODIES[0][1]), np.float32(10.0))
     assert single.dtype == jnp.float32
     assert np.max(np.abs(np.asarray(single) - np.array(jaxsplit.STANDARD_CASE.reference))) < 1e-6
 

@@ -18,7 +18,7 @@ from jaxsplit import InputError, RigidBody, integrate, splitting
 from jaxsplit.core._integrate import check_count, step_size
 from jaxsplit.core._state import as_state
 
-BODY = RigidBody(jnp.array([2.0, 1.0, 0.5]))
+BODY = RigidBody(jnp.array([2.0, 1.0, 0.5]), allow_nonphysical=True)
 STEP = splitting(BODY, "strang", split="axes")
 M0 = jnp.array([0.6, 0.0, 0.8])
 
@@ -129,7 +129,7 @@ def test_bad_systems_and_splits_are_refused(build, words):
 
 
 def test_a_batched_concrete_body_with_one_state_is_refused():
-    body = RigidBody(jnp.ones((4, 3)) * jnp.array([2.0, 1.0, 0.5]))
+    body = RigidBody(jnp.ones((4, 3)) * jnp.array([2.0, 1.0, 0.5]), allow_nonphysical=True)
     _refused(lambda: integrate(splitting(body, "strang", split="axes"), M0, 0.1, 3).final, "inertia", "(4,)")
     _refused(lambda: integrate(splitting(body, "strang", split="casimir", shift=1), M0, 0.1, 3).final, "inertia")
     batch = jnp.broadcast_to(M0, (4, 3))  # one state per body: integrates

@@ -12,7 +12,7 @@ CASIMIR_TOL = 1e-13  # splitting, relative, 1e4 steps
 EULER_CASIMIR_FLOOR = 1e-2  # explicit Euler: |m|² grows by h²|f|² each step
 BOUNDED_DRIFT = 1e-8  # Strang energy error over T = 1000: bounded, no secular slope
 
-BODY = RigidBody(jnp.array(STANDARD_CASE.inertia))
+BODY = RigidBody(jnp.array(STANDARD_CASE.inertia), allow_nonphysical=True)
 M0 = jnp.array(STANDARD_CASE.m0)
 
 

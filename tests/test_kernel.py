@@ -20,7 +20,7 @@ COS_SIN_ULPS = 6  # cos_sin's exact-sign pair (one more rounding: 1 − 2s², 2s
 CASIMIR_TOL = 1e-12  # relative, 1e5 steps
 ROUNDOFF = 1e-13
 
-STANDARD = jaxsplit.RigidBody(jnp.asarray(jaxsplit.STANDARD_CASE.inertia))
+STANDARD = jaxsplit.RigidBody(jnp.asarray(jaxsplit.STANDARD_CASE.inertia), allow_nonphysical=True)
 M0 = jnp.asarray(jaxsplit.STANDARD_CASE.m0)
 
 

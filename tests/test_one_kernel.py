@@ -41,7 +41,7 @@ def program(fn, *args):
 
 
 def free_run(scheme, b, n=300, h=0.3):
-    body = jaxsplit.RigidBody(jnp.asarray(jaxsplit.STANDARD_CASE.inertia))
+    body = jaxsplit.RigidBody(jnp.asarray(jaxsplit.STANDARD_CASE.inertia), allow_nonphysical=True)
     x0 = states(b)
     step = jaxsplit.splitting(body, scheme, "casimir")
     return (lambda x: jaxsplit.integrate(step, x, h, n).final), x0

@@ -37,7 +37,7 @@ SCAN_EQUIV_TOL = 1e-14  # scanned word vs the composition's unrolled call
 SYMPLECTIC_TOL = 1e-14
 N_SAMPLES = 64
 
-BODY = RigidBody(jnp.array(STANDARD_CASE.inertia))
+BODY = RigidBody(jnp.array(STANDARD_CASE.inertia), allow_nonphysical=True)
 STATES = random_unit_states(jax.random.PRNGKey(3), N_SAMPLES)
 STEPS = jnp.exp(jax.random.uniform(jax.random.PRNGKey(4), (N_SAMPLES,), minval=np.log(1e-3), maxval=0.0))
 

@@ -51,7 +51,7 @@ def test_effective_order_8_on_random_matrices():
 
 
 def test_a_run_is_the_step_repeated_and_the_processor_telescopes():
-    body = jaxsplit.RigidBody(jnp.array([2.0, 1.0, 2.0 / 3.0]))
+    body = jaxsplit.RigidBody(jnp.array([2.0, 1.0, 2.0 / 3.0]), allow_nonphysical=True)
     step = jaxsplit.splitting(body, NAME, "casimir")
     pre, kernel, post = step.processing
     assert pre and post == tuple((p, -w) for p, w in reversed(pre))  # P⁻¹: P's sub-flows undone
@@ -74,7 +74,7 @@ def test_a_run_is_the_step_repeated_and_the_processor_telescopes():
 def test_the_processor_compiles_as_one_loop_each_way():
     """P and P⁻¹ run as data (a scan over their sub-flows, once per call), so a processed step's
     program holds a kernel per sub-flow of K only, not of P and P⁻¹ as well (compile time)."""
-    step = jaxsplit.splitting(jaxsplit.RigidBody(jnp.array([2.0, 1.0, 2.0 / 3.0])), NAME, "casimir")
+    step = jaxsplit.splitting(jaxsplit.RigidBody(jnp.array([2.0, 1.0, 2.0 / 3.0]), allow_nonphysical=True), NAME, "casimir")
     _, kernel, _ = step.processing
     m0 = jnp.array([0.4536, 0.0, 0.8912])
     for program in (jax.make_jaxpr(step)(m0, 0.1), jax.make_jaxpr(lambda x: step.advance(x, 0.1, 7))(m0)):
@@ -85,7 +85,7 @@ def test_the_processor_compiles_as_one_loop_each_way():
 def test_reversible_gradient_of_a_processed_run_equals_forward_mode():
     """The backward pass rebuilds P⁻¹ ∘ K^n ∘ P sub-flow by sub-flow; forward mode (jvp) is the
     independent reference (one compilation instead of the stored gradient's two)."""
-    body = jaxsplit.RigidBody(jnp.array([2.0, 1.0, 2.0 / 3.0]))
+    body = jaxsplit.RigidBody(jnp.array([2.0, 1.0, 2.0 / 3.0]), allow_nonphysical=True)
     step = jaxsplit.splitting(body, NAME, "casimir")
     m0, direction = jnp.array([0.4536, 0.0, 0.8912]), jnp.array([0.2, -0.7, 0.4])
     weights = jnp.array([0.3, -1.0, 2.0])

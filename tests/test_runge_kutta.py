@@ -36,7 +36,7 @@ ORDER_TOL = 0.3
 NEWTON_UNCONVERGED = 1e-8  # residual after one Newton iteration at h = 0.5
 FIELD_TOL = 1e-15
 
-BODY = RigidBody(jnp.array(STANDARD_CASE.inertia))
+BODY = RigidBody(jnp.array(STANDARD_CASE.inertia), allow_nonphysical=True)
 M0 = jnp.array(STANDARD_CASE.m0)
 REFERENCE = jnp.array(STANDARD_CASE.reference)
 

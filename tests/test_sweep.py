@@ -7,7 +7,7 @@ import pytest
 
 import jaxsplit
 from jaxsplit import InputError
-from jaxsplit.explore._batch import resolved_groups
+from jaxsplit.explore._batch import any_body, resolved_groups
 from jaxsplit.explore._sweep import _case_kernel
 
 REFERENCE_TOL = 1e-13  # reference_solution vs the 30-digit value of the standard case
@@ -24,7 +24,7 @@ SC = jaxsplit.STANDARD_CASE
 
 def _standard_cases(step_sizes):
     cases = jaxsplit.sweep_cases(states=[SC.m0], ratios=[np.array(SC.inertia[1:]) / SC.inertia[0]],
-                                 step_sizes=step_sizes)
+                                 step_sizes=step_sizes, physical_only=False)  # (2, 1, 2/3): non-physical
     cases["inertia"] = cases["inertia"] * SC.inertia[0]
     return cases
 
@@ -50,10 +50,10 @@ def test_random_cases_are_physical_unit_and_reproducible():
 
 def test_standard_case_against_integrate_and_reference():
     hs = [0.1, 0.05, 0.025]
-    out = jaxsplit.sweep("strang", _standard_cases(hs), t_end=SC.t_end)
+    out = jaxsplit.sweep("strang", _standard_cases(hs), t_end=SC.t_end, allow_nonphysical=True)
     assert np.max(np.abs(out["reference"] - np.array(SC.reference))) < REFERENCE_TOL
     assert np.all(out["reference_accuracy"] < HALF_STEP_TOL)
-    body = jaxsplit.RigidBody(jnp.asarray(SC.inertia))
+    body = jaxsplit.RigidBody(jnp.asarray(SC.inertia), allow_nonphysical=True)
     for h, n, m in zip(out["h"], out["n_steps"], out["m_final"]):
         direct = jaxsplit.integrate(jaxsplit.splitting(body, "strang"), jnp.asarray(SC.m0), h, int(n)).final
         assert np.max(np.abs(np.asarray(direct) - m)) < MATCH_TOL
@@ -86,12 +86,12 @@ def test_chunking_does_not_change_results():
 
 def test_auto_shift_axis_is_the_middle_inverse_moment():
     inertia = np.array([[2.0, 1.0, 2 / 3], [1.0, 3.0, 2.0], [1.0, 0.5, 0.8]])
-    groups = resolved_groups(jaxsplit.RigidBody, inertia, "casimir", {"shift": "auto"})
+    groups = resolved_groups(any_body, inertia, "casimir", {"shift": "auto"})  # (2, 1, 2/3) included
     assert sorted(i for *_, idx in groups for i in idx) == [0, 1, 2]
     for name, options, idx in groups:
         for row in inertia[idx]:
             assert name == "casimir" and options["shift"] == int(np.argsort(1 / row)[1])
-            assert options["shift"] == jaxsplit.RigidBody(row).shift_axis("auto")
+            assert options["shift"] == any_body(row).shift_axis("auto")
 
 
 def test_dtype_follows_the_cases():

@@ -163,7 +163,7 @@ def test_rigid_body_parameters_trace_through_grad_and_vmap():
 
 # ------------------------------------------------------------------ nesting
 def test_a_composition_is_a_flow_and_nests():
-    f0, f1, f2 = jaxsplit.RigidBody([2.0, 1.0, 2 / 3]).split("axes")
+    f0, f1, f2 = jaxsplit.RigidBody([2.0, 1.0, 2 / 3], allow_nonphysical=True).split("axes")
     inner = jaxsplit.compose([f0, f1], "lie-trotter")
     assert not inner.is_group and f0.is_group
     nested = jaxsplit.compose([inner, f2], "lie-trotter")
@@ -173,7 +173,7 @@ def test_a_composition_is_a_flow_and_nests():
     # a Strang step of (Strang(f0, f1), f2) is second order; its non-group piece is never merged
     strang = jaxsplit.compose([jaxsplit.compose([f0, f1], "strang"), f2], "strang")
     assert [p for p, _ in strang.word] == [0, 1, 0] and not strang.fsal
-    body = jaxsplit.RigidBody([2.0, 1.0, 2 / 3])
+    body = jaxsplit.RigidBody([2.0, 1.0, 2 / 3], allow_nonphysical=True)
     ref = jaxsplit.integrate(jaxsplit.splitting(body, "kahan-li-8", "casimir"), m, 0.01, 1000).final
     fit = jaxsplit.estimate_order(strang, m, 10.0, jaxsplit.ladder(100, 8.0, 6), ref)
     assert abs(fit.order - 2) <= ORDER_TOL
@@ -204,7 +204,7 @@ def test_invalid_combinations_are_clear_errors():
     with pytest.raises(InputError, match="shift must be 0, 1, 2"):
         jaxsplit.splitting(jaxsplit.RigidBody([1.0, 2.0, 3.0]), "strang", "casimir", shift=3)
     # the free body's Casimir flows on an extended state: a clear error, not a silent wrong answer
-    casimir = jaxsplit.splitting(jaxsplit.RigidBody([2.0, 1.0, 0.5]), "strang", "casimir")
+    casimir = jaxsplit.splitting(jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True), "strang", "casimir")
     with pytest.raises(InputError, match="shape"):
         jaxsplit.integrate(casimir, X0, 0.1, 10)
     with pytest.raises(InputError, match=r"m must have shape \(\.\.\., 3\)"):
@@ -213,7 +213,7 @@ def test_invalid_combinations_are_clear_errors():
 
 # ------------------------------------------------------------------ PyTree states
 def test_integer_leaves_are_left_alone():
-    step = jaxsplit.compose(jaxsplit.RigidBody([2.0, 1.0, 0.5]).split("axes"), "strang")
+    step = jaxsplit.compose(jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True).split("axes"), "strang")
     rotations = [jaxsplit.AxisRotation(f.axis, f.rate, ("momentum", "fixed")) for f in step.flows]
     step = jaxsplit.compose(rotations, "strang")
     x0 = (jnp.array([0.4, 0.0, 0.9]), jnp.array([7, 8], dtype=jnp.int32))
@@ -225,7 +225,7 @@ def test_integer_leaves_are_left_alone():
     assert float(defect) <= POISSON_TOL
     errors = jaxsplit.invariant_errors(lambda x: x[0] @ x[0], traj)
     assert float(errors.max_relative) <= CASIMIR_TOL
-    plain = jaxsplit.splitting(jaxsplit.RigidBody([2.0, 1.0, 0.5]), "strang")
+    plain = jaxsplit.splitting(jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True), "strang")
     assert jaxsplit.integrate(plain, jnp.array([1, 0, 0]), 0.1, 3).final.dtype == jnp.result_type(float)
     with pytest.raises(InputError, match=r"tuple of 2 parts .* got an array of shape \(3,\)"):
         jaxsplit.integrate(step, jnp.array([1.0, 0, 0]), 0.1, 3)

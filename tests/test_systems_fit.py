@@ -31,11 +31,11 @@ T = np.linspace(0.0, 6.0, 31)
 
 
 def known_weight(params):
-    return jaxsplit.heavy_top(INERTIA, params["com"], WEIGHT)
+    return jaxsplit.heavy_top(INERTIA, params["com"], WEIGHT, allow_nonphysical=True)
 
 
 def free_weight(params):
-    return jaxsplit.heavy_top(INERTIA, params["com"], jnp.exp(params["log_weight"]))
+    return jaxsplit.heavy_top(INERTIA, params["com"], jnp.exp(params["log_weight"]), allow_nonphysical=True)
 
 
 @pytest.fixture(scope="module")

@@ -31,11 +31,11 @@ QUAT = jnp.array([0.8, 0.1, -0.3, 0.5]) / np.linalg.norm([0.8, 0.1, -0.3, 0.5])
 
 # (label, system, state, splits): every system and every split it offers
 SYSTEMS = [
-    ("attitude", jaxsplit.attitude(INERTIA), (M, Q0), ("axes", "spin")),
-    ("attitude-quaternion", jaxsplit.attitude(INERTIA, quaternion=True), (M, QUAT), ("axes", "spin")),
-    ("heavy-top", jaxsplit.heavy_top(INERTIA, CHI, 1.3), (M, GAMMA), ("axes",)),
+    ("attitude", jaxsplit.attitude(INERTIA, allow_nonphysical=True), (M, Q0), ("axes", "spin")),
+    ("attitude-quaternion", jaxsplit.attitude(INERTIA, quaternion=True, allow_nonphysical=True), (M, QUAT), ("axes", "spin")),
+    ("heavy-top", jaxsplit.heavy_top(INERTIA, CHI, 1.3, allow_nonphysical=True), (M, GAMMA), ("axes",)),
     ("lagrange-top", jaxsplit.heavy_top(SYMMETRIC, jnp.array([0.0, 0.0, 0.4]), 1.3), (M, GAMMA), ("axes", "symmetric")),
-    ("gravity-gradient", jaxsplit.gravity_gradient(INERTIA, 0.7), (M, GAMMA), ("axes",)),
+    ("gravity-gradient", jaxsplit.gravity_gradient(INERTIA, 0.7, allow_nonphysical=True), (M, GAMMA), ("axes",)),
     ("gravity-gradient-symmetric", jaxsplit.gravity_gradient(SYMMETRIC, 0.7), (M, GAMMA), ("axes", "symmetric")),
 ]
 IDS = [s[0] for s in SYSTEMS]
@@ -82,16 +82,16 @@ def test_vector_fields_are_the_physical_equations():
     """Π∇H (generic, jax.grad) against the equations written out by hand."""
     w = 1 / INERTIA
     omega = w * M
-    attitude = jaxsplit.attitude(INERTIA).vector_field((M, Q0))
+    attitude = jaxsplit.attitude(INERTIA, allow_nonphysical=True).vector_field((M, Q0))
     np.testing.assert_allclose(attitude[0], jnp.cross(M, omega), atol=ROUNDOFF)
     np.testing.assert_allclose(attitude[1], Q0 @ hat(omega), atol=ROUNDOFF)
-    quaternion = jaxsplit.attitude(INERTIA, quaternion=True).vector_field((M, QUAT))
+    quaternion = jaxsplit.attitude(INERTIA, quaternion=True, allow_nonphysical=True).vector_field((M, QUAT))
     np.testing.assert_allclose(quaternion[1], 0.5 * jaxsplit.quaternion_multiply(QUAT, jnp.concatenate(
         [jnp.zeros(1), omega])), atol=ROUNDOFF)
-    top = jaxsplit.heavy_top(INERTIA, CHI, 1.3).vector_field((M, GAMMA))
+    top = jaxsplit.heavy_top(INERTIA, CHI, 1.3, allow_nonphysical=True).vector_field((M, GAMMA))
     np.testing.assert_allclose(top[0], jnp.cross(M, omega) + 1.3 * jnp.cross(GAMMA, CHI), atol=ROUNDOFF)
     np.testing.assert_allclose(top[1], jnp.cross(GAMMA, omega), atol=ROUNDOFF)
-    satellite = jaxsplit.gravity_gradient(INERTIA, 0.7).vector_field((M, GAMMA))
+    satellite = jaxsplit.gravity_gradient(INERTIA, 0.7, allow_nonphysical=True).vector_field((M, GAMMA))
     torque = 3 * 0.7**2 * jnp.cross(GAMMA, INERTIA * GAMMA)  # the gravity-gradient torque
     np.testing.assert_allclose(satellite[0], jnp.cross(M, omega) + torque, atol=ROUNDOFF)
 
@@ -166,32 +166,32 @@ def test_parameters_are_traced():
     def run(system, h=0.1):
         return jaxsplit.integrate(jaxsplit.splitting(system, "strang"), (M, GAMMA), h, 20).final
 
-    first = run(jaxsplit.heavy_top(INERTIA, CHI, 1.3))
+    first = run(jaxsplit.heavy_top(INERTIA, CHI, 1.3, allow_nonphysical=True))
     before = compilations()
-    other = run(jaxsplit.heavy_top(INERTIA * 1.2, CHI[::-1], 0.4), 0.07)
+    other = run(jaxsplit.heavy_top(INERTIA * 1.2, CHI[::-1], 0.4, allow_nonphysical=True), 0.07)
     assert compilations() == before
     assert float(jnp.max(jnp.abs(first[0] - other[0]))) > 1e-3
-    run(jaxsplit.gravity_gradient(INERTIA, 0.7))
+    run(jaxsplit.gravity_gradient(INERTIA, 0.7, allow_nonphysical=True))
     before = compilations()
-    run(jaxsplit.gravity_gradient(INERTIA * 0.9, 1.1))
+    run(jaxsplit.gravity_gradient(INERTIA * 0.9, 1.1, allow_nonphysical=True))
     assert compilations() == before
 
 
 @pytest.mark.parametrize("build, message", [
     (lambda: jaxsplit.heavy_top([1.0, -1.0, 2.0], CHI), "inertia must be positive"),
     (lambda: jaxsplit.heavy_top([1.0, 0.0, 2.0], CHI), "inertia must be positive"),
-    (lambda: jaxsplit.heavy_top(INERTIA, [0.0, np.nan, 1.0]), "center_of_mass must be finite"),
-    (lambda: jaxsplit.heavy_top(INERTIA, [0.0, np.inf, 1.0]), "center_of_mass must be finite"),
-    (lambda: jaxsplit.heavy_top(INERTIA, [0.0, 1.0]), "center_of_mass must have 3 components"),
-    (lambda: jaxsplit.heavy_top(INERTIA, CHI, -1.0), "weight must be finite and >= 0"),
-    (lambda: jaxsplit.heavy_top(INERTIA, CHI, np.nan), "weight must be finite and >= 0"),
-    (lambda: jaxsplit.gravity_gradient(INERTIA, -0.1), "rate must be finite and >= 0"),
+    (lambda: jaxsplit.heavy_top(INERTIA, [0.0, np.nan, 1.0], allow_nonphysical=True), "center_of_mass must be finite"),
+    (lambda: jaxsplit.heavy_top(INERTIA, [0.0, np.inf, 1.0], allow_nonphysical=True), "center_of_mass must be finite"),
+    (lambda: jaxsplit.heavy_top(INERTIA, [0.0, 1.0], allow_nonphysical=True), "center_of_mass must have 3 components"),
+    (lambda: jaxsplit.heavy_top(INERTIA, CHI, -1.0, allow_nonphysical=True), "weight must be finite and >= 0"),
+    (lambda: jaxsplit.heavy_top(INERTIA, CHI, np.nan, allow_nonphysical=True), "weight must be finite and >= 0"),
+    (lambda: jaxsplit.gravity_gradient(INERTIA, -0.1, allow_nonphysical=True), "rate must be finite and >= 0"),
     (lambda: jaxsplit.gravity_gradient([1.0, 2.0, np.inf], 0.1), "inertia must be finite"),
     (lambda: jaxsplit.attitude([1.0, 2.0]), "3 components"),
-    (lambda: jaxsplit.attitude(INERTIA, quaternion="yes"), "quaternion must be True or False"),
+    (lambda: jaxsplit.attitude(INERTIA, quaternion="yes", allow_nonphysical=True), "quaternion must be True or False"),
     (lambda: jaxsplit.heavy_top([1.0, np.nan, 2.0], CHI), "inertia must be finite"),
-    (lambda: jaxsplit.gravity_gradient(INERTIA, np.inf), "rate must be finite and >= 0"),
-    (lambda: jaxsplit.heavy_top(INERTIA, "up"), "center_of_mass must be numeric"),
+    (lambda: jaxsplit.gravity_gradient(INERTIA, np.inf, allow_nonphysical=True), "rate must be finite and >= 0"),
+    (lambda: jaxsplit.heavy_top(INERTIA, "up", allow_nonphysical=True), "center_of_mass must be numeric"),
 ])
 def test_bad_parameters_are_one_line_errors(build, message):
     with pytest.raises(InputError, match=message) as info:
@@ -200,20 +200,20 @@ def test_bad_parameters_are_one_line_errors(build, message):
 
 
 GOOD_STATES = [  # (system, state): every one passes check_state
-    (jaxsplit.heavy_top(INERTIA, CHI), (M, GAMMA)),
-    (jaxsplit.gravity_gradient(INERTIA, 0.7), (jnp.stack([M, -M]), jnp.stack([GAMMA, -GAMMA]))),  # a batch
-    (jaxsplit.heavy_top(INERTIA, CHI), (M.astype(jnp.float32), (GAMMA * (1 + 1e-4)).astype(jnp.float32))),
-    (jaxsplit.attitude(INERTIA), (M, Q0)),
-    (jaxsplit.attitude(INERTIA, quaternion=True), (M, QUAT)),
+    (jaxsplit.heavy_top(INERTIA, CHI, allow_nonphysical=True), (M, GAMMA)),
+    (jaxsplit.gravity_gradient(INERTIA, 0.7, allow_nonphysical=True), (jnp.stack([M, -M]), jnp.stack([GAMMA, -GAMMA]))),  # a batch
+    (jaxsplit.heavy_top(INERTIA, CHI, allow_nonphysical=True), (M.astype(jnp.float32), (GAMMA * (1 + 1e-4)).astype(jnp.float32))),
+    (jaxsplit.attitude(INERTIA, allow_nonphysical=True), (M, Q0)),
+    (jaxsplit.attitude(INERTIA, quaternion=True, allow_nonphysical=True), (M, QUAT)),
 ]
 BAD_STATES = [  # (system, state, message)
-    (jaxsplit.heavy_top(INERTIA, CHI), (M, 2 * GAMMA), r"Γ must be a unit vector .* got \|Γ\| = \[2.0\]"),
-    (jaxsplit.heavy_top(INERTIA, CHI), (M, GAMMA * (1 + 1e-4)), "Γ must be a unit vector"),  # float64: √ε = 1.5e-8
-    (jaxsplit.gravity_gradient(INERTIA, 0.7), (M.at[1].set(np.nan), GAMMA), "must be finite, got \\[nan\\]"),
-    (jaxsplit.attitude(INERTIA), (M, 1.01 * Q0), "Q must be orthogonal"),
-    (jaxsplit.attitude(INERTIA), (M, Q0 * jnp.array([1.0, 1.0, -1.0])), "Q must be a rotation, not a reflection"),
-    (jaxsplit.attitude(INERTIA, quaternion=True), (M, 1.1 * QUAT), "q must be a unit quaternion"),
-    (jaxsplit.heavy_top(INERTIA, CHI), M, r"tuple \(m, Γ\)"),
+    (jaxsplit.heavy_top(INERTIA, CHI, allow_nonphysical=True), (M, 2 * GAMMA), r"Γ must be a unit vector .* got \|Γ\| = \[2.0\]"),
+    (jaxsplit.heavy_top(INERTIA, CHI, allow_nonphysical=True), (M, GAMMA * (1 + 1e-4)), "Γ must be a unit vector"),  # float64: √ε = 1.5e-8
+    (jaxsplit.gravity_gradient(INERTIA, 0.7, allow_nonphysical=True), (M.at[1].set(np.nan), GAMMA), "must be finite, got \\[nan\\]"),
+    (jaxsplit.attitude(INERTIA, allow_nonphysical=True), (M, 1.01 * Q0), "Q must be orthogonal"),
+    (jaxsplit.attitude(INERTIA, allow_nonphysical=True), (M, Q0 * jnp.array([1.0, 1.0, -1.0])), "Q must be a rotation, not a reflection"),
+    (jaxsplit.attitude(INERTIA, quaternion=True, allow_nonphysical=True), (M, 1.1 * QUAT), "q must be a unit quaternion"),
+    (jaxsplit.heavy_top(INERTIA, CHI, allow_nonphysical=True), M, r"tuple \(m, Γ\)"),
 ]
 
 
@@ -231,31 +231,31 @@ def test_bad_states_are_one_line_errors(system, state, message):
 
 def test_exact_solution_checks_the_attitude():
     with pytest.raises(InputError, match="Q must be a rotation"):
-        jaxsplit.exact_solution(INERTIA, (M, -Q0), 1.0)
+        jaxsplit.exact_solution(jaxsplit.RigidBody(INERTIA, allow_nonphysical=True), (M, -Q0), 1.0)
 
 
 def test_zero_weight_is_a_free_body_carrying_the_vertical():
     """weight = 0 is legal: m follows the free body's exact solution, Γ the transported vertical."""
-    top = jaxsplit.heavy_top(INERTIA, CHI, 0.0)
+    top = jaxsplit.heavy_top(INERTIA, CHI, 0.0, allow_nonphysical=True)
     x = jaxsplit.integrate(jaxsplit.roll(jaxsplit.splitting(top, "kahan-li-8")), (M, Q0[2]), 0.01, 500).final
-    m, q = jaxsplit.exact_solution(INERTIA, (M, Q0), 5.0)
+    m, q = jaxsplit.exact_solution(top, (M, Q0), 5.0)
     np.testing.assert_allclose(x[0], m, atol=1e-12)
     np.testing.assert_allclose(x[1], q[2], atol=1e-12)  # Γ = Qᵀ e_3: the third row of Q
 
 
 def test_refused_and_conditional_splits():
-    for system, state in [(jaxsplit.attitude(INERTIA), (M, Q0)), (jaxsplit.heavy_top(INERTIA, CHI), (M, GAMMA)),
-                          (jaxsplit.gravity_gradient(INERTIA, 0.5), (M, GAMMA))]:
+    for system, state in [(jaxsplit.attitude(INERTIA, allow_nonphysical=True), (M, Q0)), (jaxsplit.heavy_top(INERTIA, CHI, allow_nonphysical=True), (M, GAMMA)),
+                          (jaxsplit.gravity_gradient(INERTIA, 0.5, allow_nonphysical=True), (M, GAMMA))]:
         with pytest.raises(InputError, match="'casimir' is not offered by .*no Casimir"):
             jaxsplit.splitting(system, "strang", "casimir")
     with pytest.raises(InputError, match="needs I1 = I2"):
-        jaxsplit.splitting(jaxsplit.heavy_top(INERTIA, CHI), "strang", "symmetric")
+        jaxsplit.splitting(jaxsplit.heavy_top(INERTIA, CHI, allow_nonphysical=True), "strang", "symmetric")
     with pytest.raises(InputError, match="needs exactly 2 pieces"):
-        jaxsplit.splitting(jaxsplit.heavy_top(INERTIA, CHI), "blanes-moan-s6-prk")
+        jaxsplit.splitting(jaxsplit.heavy_top(INERTIA, CHI, allow_nonphysical=True), "blanes-moan-s6-prk")
     with pytest.raises(InputError, match="shift must be 0, 1, 2"):
-        jaxsplit.splitting(jaxsplit.attitude(INERTIA), "strang", "spin", shift=5)
-    assert jaxsplit.attitude(INERTIA).resolve_split("spin") == ("spin", {"shift": 1})
+        jaxsplit.splitting(jaxsplit.attitude(INERTIA, allow_nonphysical=True), "strang", "spin", shift=5)
+    assert jaxsplit.attitude(INERTIA, allow_nonphysical=True).resolve_split("spin") == ("spin", {"shift": 1})
     with pytest.raises(InputError, match=r"the attitude part must have shape \(\.\.\., 3, 3\)"):
-        jaxsplit.integrate(jaxsplit.splitting(jaxsplit.attitude(INERTIA), "strang"), (M, QUAT), 0.1, 2)
+        jaxsplit.integrate(jaxsplit.splitting(jaxsplit.attitude(INERTIA, allow_nonphysical=True), "strang"), (M, QUAT), 0.1, 2)
     with pytest.raises(InputError, match=r"tuple \(m, Γ\)"):
-        jaxsplit.heavy_top(INERTIA, CHI).hamiltonian(M)
+        jaxsplit.heavy_top(INERTIA, CHI, allow_nonphysical=True).hamiltonian(M)

@@ -6,7 +6,6 @@ compilation (shape refusals while tracing); the few runs are a handful of steps.
 """
 
 import math
-import re
 import warnings
 
 import jax
@@ -80,35 +79,83 @@ def test_parameter_batches_that_do_not_broadcast_are_refused_when_built(build):
     _refused(build, "batch shapes do not broadcast")
 
 
-# ---------------------------------------------------------------- non-physical bodies: refused on request, warned by default
+# ---------------------------------------------------------------- non-physical bodies: refused unless flagged
 CONSTRUCTORS = {
     "RigidBody": lambda i, **kw: jaxsplit.RigidBody(i, **kw),
+    "rigid_body": lambda i, **kw: jaxsplit.systems.rigid_body(i, **kw),
     "attitude": lambda i, **kw: jaxsplit.attitude(i, **kw),
+    "attitude-quaternion": lambda i, **kw: jaxsplit.attitude(i, quaternion=True, **kw),
     "heavy_top": lambda i, **kw: jaxsplit.heavy_top(i, CHI, 1.0, **kw),
     "gravity_gradient": lambda i, **kw: jaxsplit.gravity_gradient(i, 1.0, **kw),
 }
+NONPHYSICAL = [([1.0, 1.0, 5.0], "I1 + I2 >= I3"), ([5.0, 1.0, 1.0], "I2 + I3 >= I1"),
+               ([1.0, 5.0, 1.0], "I3 + I1 >= I2")]
 
 
 @pytest.mark.parametrize("name", list(CONSTRUCTORS))
-@pytest.mark.parametrize("inertia,failing", [
-    ([1.0, 1.0, 5.0], "I1 + I2 >= I3"), ([5.0, 1.0, 1.0], "I2 + I3 >= I1"), ([1.0, 5.0, 1.0], "I3 + I1 >= I2"),
-])
+@pytest.mark.parametrize("inertia,failing", NONPHYSICAL)
 def test_every_body_constructor_refuses_a_non_physical_body_unless_allowed(name, inertia, failing):
     build = CONSTRUCTORS[name]
-    _refused(lambda: build(inertia, allow_nonphysical=False), "not a physical body", failing,
-             "allow_nonphysical=True")
+    shown = ",".join(f"{v:g}" for v in inertia)
+    for kwargs in ({}, {"allow_nonphysical": False}):  # refused by default, as by the CLI
+        _refused(lambda kwargs=kwargs: build(inertia, **kwargs), f"inertia {shown} is not a physical body", failing,
+                 "allow_nonphysical=True")
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # allowed: no warning either
         assert np.allclose(build(inertia, allow_nonphysical=True).inertia, inertia)
-    with pytest.warns(FutureWarning, match=re.escape(failing)):  # the default, until the standard body says so
-        build(inertia)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        build(PHYSICAL, allow_nonphysical=False)  # a physical body: no warning, no refusal
+        build(PHYSICAL)  # a physical body: no warning, no refusal
+
+
+BARE_MOMENTS = {  # functions taking bare moments (no flag of their own): a built body is the way
+    "splitting": lambda i: jaxsplit.splitting(i, "strang"),
+    "exact_solution": lambda i: jaxsplit.exact_solution(i, M0, 1.0),
+    "symmetric_solution": lambda i: jaxsplit.symmetric_solution(i, M0, 1.0),
+    "rigid_body_system": lambda i: jaxsplit.rigid_body_system(i),
+}
+
+
+@pytest.mark.parametrize("name", list(BARE_MOMENTS))
+def test_functions_taking_bare_moments_refuse_a_non_physical_body_and_name_the_built_body(name):
+    _refused(lambda: BARE_MOMENTS[name](jnp.array([1.0, 1.0, 5.0])), "inertia 1,1,5 is not a physical body",
+             "RigidBody(inertia, allow_nonphysical=True)")
+    BARE_MOMENTS[name](jaxsplit.RigidBody(jnp.array([1.0, 1.0, 5.0]), allow_nonphysical=True))  # built: accepted
+
+
+CASE_FUNCTIONS = {  # the default family (RigidBody) of the explore functions takes the flag too
+    "sweep": lambda i, **kw: jaxsplit.sweep("strang", {"m0": M0[None], "inertia": i[None], "h": np.array([0.5])},
+                                            t_end=1.0, **kw),
+    "reference_solution": lambda i, **kw: jaxsplit.reference_solution(M0[None], i[None], 0.5, **kw),
+    "stability_map": lambda i, **kw: jaxsplit.stability_map("strang", [0.1], i[None], **kw),
+    "tune_scheme": lambda i, **kw: jaxsplit.tune_scheme(i[None], M0[None], t_end=0.5, n_steps=2, iterations=0,
+                                                        scan_points=0, **kw),
+}
+
+
+@pytest.mark.parametrize("name", list(CASE_FUNCTIONS))
+def test_the_explore_functions_refuse_non_physical_cases_unless_allowed(name):
+    inertia = jnp.array([1.0, 1.0, 5.0])
+    _refused(lambda: CASE_FUNCTIONS[name](inertia), "inertia 1,1,5 is not a physical body", "allow_nonphysical=True")
+    if name in ("reference_solution", "tune_scheme"):  # cheap to run; a sweep and a map compile (test_sweep, ...)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            CASE_FUNCTIONS[name](inertia, allow_nonphysical=True)
+
+
+def test_the_standard_case_is_non_physical_and_built_by_its_body_method():
+    """(2, 1, 2/3) is the literature's body, not a physical one: bare, it is refused; ``body()``
+    passes the flag in one documented place."""
+    case = jaxsplit.STANDARD_CASE
+    _refused(lambda: jaxsplit.RigidBody(case.inertia), "inertia 2,1,0.666667 is not a physical body",
+             "I2 + I3 >= I1", "allow_nonphysical=True")
+    assert case.body().inertia.tolist() == list(case.inertia)
+    assert case.body(jnp.float32).inertia.dtype == jnp.float32
+    assert "allow_nonphysical=True" in type(case).__doc__
 
 
 def test_the_flag_is_a_bool_and_a_batch_names_its_body():
-    _refused(lambda: jaxsplit.RigidBody(PHYSICAL, allow_nonphysical="yes"), "allow_nonphysical", "True or False")
+    for value in ("yes", None, jnp.array(True)):  # None was the warning default: no third mode
+        _refused(lambda value=value: jaxsplit.RigidBody(PHYSICAL, allow_nonphysical=value), "allow_nonphysical",
+                 "True or False")
     _refused(lambda: jaxsplit.RigidBody(jnp.stack([PHYSICAL, jnp.array([1.0, 1.0, 3.0])]), allow_nonphysical=False),
              "body 1 of the batch", "I1 + I2 >= I3")
 
@@ -128,8 +175,8 @@ def test_the_command_line_uses_the_library_check():
 
 
 def test_sweep_cases_apply_the_same_policy_to_a_grid_of_ratios():
-    with pytest.warns(FutureWarning, match="physical_only=False"):
-        jaxsplit.sweep_cases(states=1, ratios=[(1.0, 3.0)])
+    _refused(lambda: jaxsplit.sweep_cases(states=1, ratios=[(1.0, 3.0)]), "the ratios' body I 1,1,3",
+             "not a physical body", "physical_only=False")
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert jaxsplit.sweep_cases(states=1, ratios=[(1.0, 3.0)], physical_only=False)["inertia"].tolist() == [

@@ -56,7 +56,7 @@ def invariant_errors(invariant: Callable, trajectory, times=None) -> InvariantEr
     (any PyTree) together with ``times`` of shape (K,). Pure ``jnp``: traced throughout.
 
     >>> import jax.numpy as jnp, jaxsplit
-    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5])
+    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True)
     >>> sol = jaxsplit.integrate(jaxsplit.splitting(body, "strang", "casimir", shift=1),
     ...                          jnp.array([0.6, 0.0, 0.8]), 0.1, 100, save_every=10)
     >>> float(jaxsplit.invariant_errors(body.casimir, sol).max_relative) < 1e-14
@@ -93,7 +93,7 @@ def monitor_invariants(system, trajectory, times=None) -> dict[str, InvariantErr
     ``trajectory`` and ``times`` as for ``invariant_errors``.
 
     >>> import jax.numpy as jnp, jaxsplit
-    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5])
+    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True)
     >>> sol = jaxsplit.integrate(jaxsplit.rk4(body), jnp.array([0.6, 0.0, 0.8]), 0.1, 100, save_every=10)
     >>> errors = jaxsplit.monitor_invariants(body, sol)
     >>> sorted(errors), float(errors["casimir"].max_relative) > 1e-9     # RK4 drifts off the sphere

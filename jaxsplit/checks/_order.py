@@ -136,7 +136,7 @@ def estimate_order(step, x0, t_end: float, counts, reference=None, *, reference_
     ``window`` (``fit_order``). ``t_end`` is traced, ``counts`` static.
 
     >>> import jax.numpy as jnp, jaxsplit
-    >>> body = jaxsplit.RigidBody(jaxsplit.STANDARD_CASE.inertia)
+    >>> body = jaxsplit.STANDARD_CASE.body()
     >>> step = jaxsplit.splitting(body, "suzuki-5", "casimir", shift=1)
     >>> fit = jaxsplit.estimate_order(step, jnp.array(jaxsplit.STANDARD_CASE.m0), 10.0, jaxsplit.ladder(40, 4.0, 4),
     ...                               jnp.array(jaxsplit.STANDARD_CASE.reference))

@@ -83,7 +83,7 @@ def poisson_defect(step: Callable, poisson_matrix: Callable, x, h):
     pure JAX (``x`` and ``h`` traced: ``vmap`` it, or use ``poisson_summary``).
 
     >>> import jax.numpy as jnp, jaxsplit
-    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5])
+    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True)
     >>> m = jnp.array([0.6, 0.0, 0.8])
     >>> float(jaxsplit.poisson_defect(jaxsplit.splitting(body, "strang"), body, m, 0.3)) < 1e-15
     True
@@ -107,7 +107,7 @@ def jacobi_defect(poisson_matrix: Callable, x):
     traced like ``poisson_defect``.
 
     >>> import jax.numpy as jnp, jaxsplit
-    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5])
+    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True)
     >>> float(jaxsplit.jacobi_defect(body, jnp.array([0.3, -0.5, 0.8])))
     0.0
     >>> float(jaxsplit.jacobi_defect(lambda x: jnp.array([[0.0, 1.0], [0.0, 0.0]]), jnp.zeros(2)))  # not skew
@@ -177,7 +177,7 @@ def orbit_symplectic_defect(step: Callable, m, h):
     does Φ keep the sphere and its KKS area form? ``m`` (3,), a scalar array; traced.
 
     >>> import jax.numpy as jnp, jaxsplit
-    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5])
+    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True)
     >>> float(jaxsplit.orbit_symplectic_defect(jaxsplit.splitting(body, "strang"), jnp.array([0.6, 0.0, 0.8]), 0.2)) < 1e-15
     True
     """
@@ -259,7 +259,7 @@ def poisson_summary(step: Callable, poisson_matrix: Callable, xs, hs) -> DefectS
     """``poisson_defect`` over a sample (maximum and where it is attained): a ``DefectSummary``.
 
     >>> import jax, jaxsplit
-    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5])
+    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True)
     >>> xs = jax.random.normal(jax.random.PRNGKey(0), (16, 3))
     >>> jaxsplit.poisson_summary(jaxsplit.splitting(body, "strang"), body, xs, 0.2).max < 1e-14
     True
@@ -272,7 +272,7 @@ def jacobi_summary(poisson_matrix: Callable, xs) -> DefectSummary:
 
     >>> import jax, jaxsplit
     >>> xs = jax.random.normal(jax.random.PRNGKey(0), (8, 3))
-    >>> jaxsplit.jacobi_summary(jaxsplit.RigidBody([2.0, 1.0, 0.5]), xs).max < 1e-15
+    >>> jaxsplit.jacobi_summary(jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True), xs).max < 1e-15
     True
     """
     return defect_summary(lambda x, h: jacobi_defect(poisson_matrix, x), xs, 0.0)

@@ -247,7 +247,7 @@ class RungeKutta(AbstractFlow):
     function theorem). ``stage_derivatives`` and ``newton_info`` expose the stage solve.
 
     >>> import jax.numpy as jnp, jaxsplit
-    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5])
+    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True)
     >>> m0 = jnp.array([0.6, 0.0, 0.8])
     >>> step = jaxsplit.runge_kutta(body, "implicit-midpoint")
     >>> m1 = step(m0, 0.1)
@@ -309,7 +309,7 @@ def runge_kutta(system, tableau: "ButcherTableau | str", *, max_iter: int = 50) 
     for ``system`` (any system of the system layer, or any f(x) -> ẋ): a ``RungeKutta``.
 
     >>> import jax.numpy as jnp, jaxsplit
-    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5])
+    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True)
     >>> m0 = jnp.array([0.6, 0.0, 0.8])
     >>> step = jaxsplit.runge_kutta(body, "gauss-legendre-2")
     >>> jaxsplit.integrate(step, m0, 0.1, 10).final.shape
@@ -398,7 +398,7 @@ def explicit_euler(system) -> RungeKutta:
     On the free body |m|² grows by exactly h²|f(m)|² a step (f ⊥ m).
 
     >>> import jax.numpy as jnp, jaxsplit
-    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5])
+    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True)
     >>> m0 = jnp.array([0.6, 0.0, 0.8])
     >>> m1 = jaxsplit.explicit_euler(body)(m0, 0.1)
     >>> f = body.vector_field(m0)
@@ -413,7 +413,7 @@ def trapezoid(system) -> RungeKutta:
     as an implicit ``RungeKutta`` step. Not Poisson: it drifts off the Casimir's sphere.
 
     >>> import jax.numpy as jnp, jaxsplit
-    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5])
+    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True)
     >>> m0 = jnp.array([0.6, 0.0, 0.8])
     >>> m1 = jaxsplit.trapezoid(body)(m0, 0.1)
     >>> float(abs(body.casimir(m1) - body.casimir(m0))) > 1e-8
@@ -427,7 +427,7 @@ def gauss_legendre(system, stages: int = 1) -> RungeKutta:
     rule (2.2). Keeps every quadratic invariant (H and C of the free body) to round-off.
 
     >>> import jax.numpy as jnp, jaxsplit
-    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5])
+    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True)
     >>> m0 = jnp.array([0.6, 0.0, 0.8])
     >>> sol = jaxsplit.integrate(jaxsplit.gauss_legendre(body, 2), m0, 0.1, 50)
     >>> float(abs(body.hamiltonian(sol.final) / body.hamiltonian(m0) - 1)) < 1e-14
@@ -440,7 +440,7 @@ def rk4(system) -> RungeKutta:
     """The classical fourth-order Runge–Kutta method for ``system`` (a ``RungeKutta`` step).
 
     >>> import jax.numpy as jnp, jaxsplit
-    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5])
+    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True)
     >>> m0 = jnp.array([0.6, 0.0, 0.8])
     >>> jaxsplit.rk4(body)(m0, 0.1).shape
     (3,)

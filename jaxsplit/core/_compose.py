@@ -291,7 +291,8 @@ class Composition(AbstractFlow):
     values seen at a call.
 
     >>> import jax.numpy as jnp, jaxsplit
-    >>> step = jaxsplit.splitting(jaxsplit.RigidBody([2.0, 1.0, 0.5]), "strang", "casimir", shift=1)
+    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True)     # 1 + 0.5 < 2: on purpose
+    >>> step = jaxsplit.splitting(body, "strang", "casimir", shift=1)
     >>> step.word, step.fsal
     (((0, 0.5), (1, 1.0), (0, 0.5)), True)
     >>> m = step(jnp.array([0.6, 0.0, 0.8]), 0.1)
@@ -545,7 +546,8 @@ class RolledComposition(AbstractFlow):
     ``pieces``, ``weights``, state, ``h``; static: only L and the number of flows.
 
     >>> import jax.numpy as jnp, jaxsplit
-    >>> step = jaxsplit.splitting(jaxsplit.RigidBody([2.0, 1.0, 0.5]), "strang", "casimir", shift=1)
+    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True)     # 1 + 0.5 < 2: on purpose
+    >>> step = jaxsplit.splitting(body, "strang", "casimir", shift=1)
     >>> rolled = jaxsplit.roll(step, 5)
     >>> rolled.pieces.tolist(), rolled.weights.tolist()
     ([0, 1, 0, 0, 0], [0.5, 1.0, 0.5, 0.0, 0.0])
@@ -574,7 +576,7 @@ def roll(composition: Composition, length: int | None = None) -> RolledCompositi
     ``jax.vmap`` runs stacked ``pieces``/``weights`` of many schemes at once.
 
     >>> import jax, jax.numpy as jnp, jaxsplit
-    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5])
+    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True)
     >>> steps = [jaxsplit.roll(jaxsplit.splitting(body, s, "casimir", shift=1), 40)
     ...          for s in ("strang", "suzuki-5", "kahan-li-6")]
     >>> pieces, weights = jnp.stack([s.pieces for s in steps]), jnp.stack([s.weights for s in steps])

@@ -310,7 +310,8 @@ class Renormalized(AbstractFlow):
 
     >>> import jax.numpy as jnp, jaxsplit
     >>> m0 = jnp.array([0.6, 0.0, 0.8], dtype=jnp.float32)
-    >>> step = jaxsplit.splitting(jaxsplit.RigidBody([2.0, 1.0, 0.5]), "strang", "casimir", shift=1)
+    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True)     # 1 + 0.5 < 2: on purpose
+    >>> step = jaxsplit.splitting(body, "strang", "casimir", shift=1)
     >>> m = jaxsplit.integrate(jaxsplit.Renormalized(step, jnp.linalg.norm(m0)), m0, 0.1, 100).final
     >>> m.dtype, bool(abs(float(jnp.linalg.norm(m)) - 1.0) < 1e-6)
     (dtype('float32'), True)

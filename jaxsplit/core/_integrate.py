@@ -49,7 +49,8 @@ class Solution(eqx.Module):
     the batch axis. ``Trajectory`` is the former name.
 
     >>> import jax.numpy as jnp, jaxsplit
-    >>> step = jaxsplit.splitting(jaxsplit.RigidBody([2.0, 1.0, 0.5]), "strang", "casimir", shift=1)
+    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True)     # 1 + 0.5 < 2: on purpose
+    >>> step = jaxsplit.splitting(body, "strang", "casimir", shift=1)
     >>> sol = jaxsplit.integrate(step, jnp.array([0.6, 0.0, 0.8]), 0.5, 4)
     >>> sol.t.tolist(), sol.x.shape, sol.final.shape, sol.n_steps, sol.scheme, sol.status
     ([0.0, 2.0], (2, 3), (3,), 4, 'strang', 'ok')
@@ -284,7 +285,8 @@ def integrate(step, x0, h, n_steps: int | None = None, *, save_every: int | None
     ``save_every``, the length of ``ts``, ``adjoint`` and the structure of ``step``.
 
     >>> import jax.numpy as jnp, jaxsplit
-    >>> step = jaxsplit.splitting(jaxsplit.RigidBody([2.0, 1.0, 0.5]), "strang", "casimir")
+    >>> body = jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True)     # 1 + 0.5 < 2: on purpose
+    >>> step = jaxsplit.splitting(body, "strang", "casimir")
     >>> sol = jaxsplit.integrate(step, jnp.array([0.6, 0.0, 0.8]), 0.1, 100, save_every=10)
     >>> sol.final.shape, sol.x.shape, float(sol.t[-1])
     ((3,), (11, 3), 10.0)

@@ -32,15 +32,11 @@ def any_body(inertia):
     return RigidBody(inertia, allow_nonphysical=True)
 
 
-def physical_body(inertia):
-    return RigidBody(inertia, allow_nonphysical=False)
-
-
-def family_of(system, allow_nonphysical: bool | None = None):
+def family_of(system, allow_nonphysical: bool = False):
     """A callable params -> system (the rigid-body class by default, whose concrete bodies
     ``allow_nonphysical`` admits as ``RigidBody`` does; a family of your own decides itself)."""
     if system is None:
-        return {None: RigidBody, True: any_body, False: physical_body}[flag(allow_nonphysical)]
+        return any_body if flag(allow_nonphysical) else RigidBody
     if isinstance(system, AbstractSystem):
         raise InputError("pass a family params -> system (e.g. jaxsplit.RigidBody, or a function building "
                          "your system from per-case parameters), not one system instance")

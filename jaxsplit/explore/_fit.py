@@ -268,7 +268,7 @@ def fit(family, t, observed, params0, *, x0=None, fit_x0: bool = True, fixed=Non
     Returns a ``ParameterFit`` (concrete NumPy values) in the dtype of ``x0``.
 
     >>> import jax.numpy as jnp, numpy as np, jaxsplit
-    >>> family = lambda log_inertia: jaxsplit.RigidBody(jnp.exp(log_inertia))    # positive by construction
+    >>> family = lambda log_inertia: jaxsplit.RigidBody(jnp.exp(log_inertia), allow_nonphysical=True)
     >>> t, m0 = np.linspace(0.0, 2.0, 9), jnp.array([0.6, 0.0, 0.8])
     >>> observed = jaxsplit.simulate(family, jnp.log(jnp.array([2.0, 1.0, 0.5])), m0, t, split="casimir", shift=1)
     >>> f = jaxsplit.fit(family, t, observed, jnp.log(jnp.array([2.0, 1.1, 0.5])), x0=m0, fit_x0=False,
@@ -334,7 +334,7 @@ def simulate(family, params, x0, t, *, fixed=None, observe=None, noise: float = 
     ⌈Δt / max_step⌉ steps per interval; reproducible from ``seed``.
 
     >>> import jax.numpy as jnp, numpy as np, jaxsplit
-    >>> family = lambda log_inertia: jaxsplit.RigidBody(jnp.exp(log_inertia))    # positive by construction
+    >>> family = lambda log_inertia: jaxsplit.RigidBody(jnp.exp(log_inertia), allow_nonphysical=True)
     >>> t, m0 = np.linspace(0.0, 2.0, 9), jnp.array([0.6, 0.0, 0.8])
     >>> observed = jaxsplit.simulate(family, jnp.log(jnp.array([2.0, 1.0, 0.5])), m0, t, split="casimir", shift=1)
     >>> observed.shape, bool(np.allclose(observed[0], m0))

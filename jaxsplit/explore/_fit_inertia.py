@@ -225,7 +225,7 @@ def fit_inertia(t, m, *, energy: float | None = None, energy_sigma: float = 0.0,
     >>> import numpy as np, jaxsplit
     >>> t, m0 = np.linspace(0.0, 2.0, 9), np.array([0.6, 0.0, 0.8])
     >>> m = jaxsplit.simulate_observations([2.0, 1.0, 0.5], m0, t, noise=0.0)
-    >>> energy = float(jaxsplit.RigidBody([2.0, 1.0, 0.5]).hamiltonian(m0))
+    >>> energy = float(jaxsplit.RigidBody([2.0, 1.0, 0.5], allow_nonphysical=True).hamiltonian(m0))
     >>> r = jaxsplit.fit_inertia(t, m, energy=energy, max_step=0.25, adam_steps=0, lbfgs_iter=40)
     >>> np.round(r.inertia, 6).tolist(), r.gauge
     ([2.0, 1.0, 0.5], 'energy E = 0.73 (sigma 0)')

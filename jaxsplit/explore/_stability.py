@@ -83,11 +83,12 @@ def _leaf_rank(system, equilibria, tol=1e-10) -> int:
 
 
 def stability_map(scheme, step_sizes, params, *, system=None, split: str | None = None, equilibria=None,
-                  tol: float = STABILITY_TOL, **split_options) -> dict:
+                  tol: float = STABILITY_TOL, allow_nonphysical: bool = False, **split_options) -> dict:
     """Linear stability at the equilibria for every (h, parameters); arrays (n_h, n_params, E, ...).
 
     ``system`` is a family params -> system (default ``RigidBody``: ``params`` are inertias
-    (n, 3), the equilibria m = e_1, e_2, e_3); ``equilibria`` a function system -> states
+    (n, 3), the equilibria m = e_1, e_2, e_3; ``allow_nonphysical`` admits non-physical ones,
+    as for ``RigidBody``); ``equilibria`` a function system -> states
     with a leading axis E (default ``system.equilibria()``). Returns ``eigenvalues`` of DΦ
     (complex; the transverse ones first, then the leaf's), ``leaf_eigenvalues``,
     ``spectral_radius`` (on the leaf), ``trace`` and ``det`` of the leaf block (det = 1 for
@@ -105,7 +106,7 @@ def stability_map(scheme, step_sizes, params, *, system=None, split: str | None 
     ((2, 1, 3), [True, False, True])
     """
     scheme = schemes.resolve(scheme)
-    family = family_of(system)
+    family = family_of(system, allow_nonphysical)
     h = np.atleast_1d(np.asarray(step_sizes, dtype=float))
     if h.ndim != 1 or len(h) == 0 or not np.all(np.isfinite(h) & (h > 0)):
         raise InputError(f"step_sizes must be positive finite numbers, got {np.asarray(step_sizes).tolist()}")

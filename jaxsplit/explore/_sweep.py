@@ -150,7 +150,7 @@ def sweep_cases(*, states=8, ratios=((1.0, 0.5),), step_sizes=(0.1,), sampling: 
     lattice, or an array of directions, normalised), ``ratios`` (pairs (I2/I1, I3/I1)) and
     ``step_sizes``, ordered ratio-major, then h, then state; ``*_index`` give the position
     of each case in each axis, so ``out[key].reshape(K_ratios, K_h, K_states)`` works.
-    A ratio pair of a non-physical body warns (``RigidBody``'s policy) unless
+    A ratio pair of a non-physical body is refused (``RigidBody``'s policy) unless
     ``physical_only=False``.
 
     ``sampling="random"``: ``n_samples`` cases with m0 uniform on the sphere, each ratio
@@ -168,9 +168,9 @@ def sweep_cases(*, states=8, ratios=((1.0, 0.5),), step_sizes=(0.1,), sampling: 
     dt = _float_dtype(dtype)
     if sampling == "grid":
         r, h = _ratios_array(ratios), _positive_vector(step_sizes, "step_sizes")
-        # a non-physical body warns for now, as the constructors do (``check_moments``)
+        # a non-physical body is refused, as the constructors do (``check_moments``)
         check_moments(np.concatenate([np.ones((len(r), 1)), r], axis=1), "the ratios' body I",
-                      None if physical_only else True, "physical_only=False")
+                      not physical_only, "physical_only=False")
         n_states = count(states, "states") if np.ndim(states) == 0 else len(np.asarray(states))
         _case_memory(n_states * len(r) * len(h), f"{n_states:,} states x {len(r):,} ratios x {len(h):,} step sizes")
         s = _states_array(states)
@@ -283,7 +283,7 @@ MAX_REFINEMENTS = 3
 
 def reference_solution(x0, params, t_end: float, *, system=None, scheme="kahan-li-8", split=None,
                        angle: float = 0.1, tol: float = REFERENCE_TOL, chunk_size: int = 1024, devices=None,
-                       allow_nonphysical: bool | None = None, **split_options):
+                       allow_nonphysical: bool = False, **split_options):
     """x(t_end) for each case (x0[i], params[i]) of the family ``system`` (default
     ``RigidBody``: x0 = m0 (N, 3), params = inertia (N, 3)), by ``scheme`` (8th order by
     default) on the system's ``reference_split`` (or ``split`` with ``split_options``) with
@@ -340,14 +340,14 @@ def _check_t_end(t_end):
 
 def sweep(scheme, cases: dict, *, t_end: float, system=None, split: str | None = None,
           reference_scheme="kahan-li-8", reference_angle: float = 0.1, chunk_size: int = 1024,
-          devices=None, allow_nonphysical: bool | None = None, **split_options) -> dict:
+          devices=None, allow_nonphysical: bool = False, **split_options) -> dict:
     """Evaluate ``scheme`` on every case (see the module docstring for the inputs and outputs):
     a dict of NumPy arrays with a leading case axis N. The cases are traced (one compilation
     per chunk shape); ``scheme``, ``split`` and its options are static. ``allow_nonphysical``
     applies to the default family's bodies, as for ``RigidBody``.
 
     >>> import jaxsplit
-    >>> cases = jaxsplit.sweep_cases(states=4, ratios=[(0.5, 0.25)], step_sizes=[0.1])
+    >>> cases = jaxsplit.sweep_cases(states=4, ratios=[(0.8, 0.6)], step_sizes=[0.1])
     >>> out = jaxsplit.sweep("strang", cases, t_end=1.0, split="casimir", shift=1)
     >>> out["casimir_error"].shape, bool(out["casimir_error"].max() < 1e-14), bool(out["poisson_defect"].max() < 1e-14)
     ((4,), True, True)

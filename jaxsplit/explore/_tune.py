@@ -102,10 +102,11 @@ def _check_set(params, states, family):
 def tune_scheme(params, states, *, system=None, stages: int = 5, t_end: float = 10.0, n_steps: int = 40,
                 split: str | None = "axes", start=None, iterations: int = 200, learning_rate: float = 0.02,
                 scan_points: int = 201, scan_range=(-3.0, 3.0), name: str | None = None,
-                **split_options) -> TunedScheme:
+                allow_nonphysical: bool = False, **split_options) -> TunedScheme:
     """Learn an order-4, ``stages``-stage symmetric composition of Strang for the training
-    systems ``system(params[i])`` (default ``RigidBody``: ``params`` are inertias (n, 3))
-    started at ``states`` (leading axis n), integrated to ``t_end`` with ``n_steps`` steps.
+    systems ``system(params[i])`` (default ``RigidBody``: ``params`` are inertias (n, 3),
+    physical unless ``allow_nonphysical``) started at ``states`` (leading axis n), integrated
+    to ``t_end`` with ``n_steps`` steps.
     ``start`` (free parameters, default Suzuki's fractal, z = 1) is also the baseline of the
     objective; with one free parameter a scan over ``scan_range`` of ``scan_points`` values
     picks the start if it beats ``start``. The systems are traced (one compilation for the
@@ -125,7 +126,7 @@ def tune_scheme(params, states, *, system=None, stages: int = 5, t_end: float = 
     iterations = count(iterations, "iterations", 0, 2**31 - 1, "a lax.scan length, counted in int32")
     scan_points = count(scan_points, "scan_points", 0, 2**31 - 1, "the objective is evaluated at every point")
     fits(scan_points * 64, f"a scan of {scan_points:,} points", "give fewer scan_points")
-    family = family_of(system)
+    family = family_of(system, allow_nonphysical)
     if any(isinstance(v, str) and v == "auto" for v in split_options.values()):
         raise InputError("tune_scheme runs every training system in one traced batch: give explicit split "
                          f"options, not 'auto' (got {split_options})")

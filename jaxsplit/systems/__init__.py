@@ -48,7 +48,7 @@ from ._spin_metropolis import metropolis as metropolis
 from ._splitting import splitting as splitting
 
 
-def rigid_body(inertia) -> RigidBody:
+def rigid_body(inertia, *, allow_nonphysical: bool = False) -> RigidBody:
     """The free rigid body, state m (3,): splits ``"axes"`` (the paper's three rotations) and
-    ``"casimir"`` (two rotations, H − C/I_k)."""
-    return RigidBody(inertia)
+    ``"casimir"`` (two rotations, H − C/I_k). ``allow_nonphysical`` as for ``RigidBody``."""
+    return RigidBody(inertia, allow_nonphysical)

@@ -39,7 +39,7 @@ class AutoSplitting(NamedTuple):
     """What ``auto_splitting`` chose: run ``integrate(step, x0, h, n_steps)``.
 
     >>> import jax.numpy as jnp, jaxsplit
-    >>> body = jaxsplit.RigidBody(jnp.array([2.0, 1.0, 2 / 3]))
+    >>> body = jaxsplit.STANDARD_CASE.body()     # I = (2, 1, 2/3)
     >>> choice = jaxsplit.auto_splitting(body, jnp.array([0.4, -0.3, 0.8]), tol=1e-8, t_end=10.0,
     ...                                 candidates=("strang", "kahan-li-6"))
     >>> choice.scheme in ("strang", "kahan-li-6"), abs(choice.n_steps * choice.h - 10.0) < 1e-12
@@ -65,7 +65,7 @@ def auto_splitting(system: AbstractSystem, x0, *, tol: float, t_end: float, cand
     (default: every split ``system`` offers, with its automatic options).
 
     >>> import jax.numpy as jnp, jaxsplit
-    >>> body = jaxsplit.RigidBody([2.0, 1.0, 2 / 3])
+    >>> body = jaxsplit.STANDARD_CASE.body()     # I = (2, 1, 2/3)
     >>> m0 = jnp.array([0.45, 0.0, 0.89])
     >>> choice = jaxsplit.auto_splitting(body, m0, tol=1e-8, t_end=10.0)
     >>> sol = jaxsplit.integrate(choice.step, m0, choice.h, choice.n_steps)

@@ -60,7 +60,7 @@ from ..core._errors import InputError
 from ..core._state import host_values
 from ._attitude import Attitude
 from ._elliptic import incomplete_pi, jacobi_reduced, legendre_integrals, safe_sqrt
-from ._rigid_body import RigidBody, as_float_array, check_inertia, is_concrete
+from ._rigid_body import as_body, as_float_array, check_inertia, is_concrete
 from ._spin import exp_hat
 from .so3 import check_shape
 
@@ -178,26 +178,29 @@ def exact_solution(body, x0, t):
 
     ``body`` is a ``RigidBody``, an ``attitude`` system or principal moments (3,); ``x0`` is
     m0 (3,), or (m0, Q0) with Q0 ∈ SO(3) (3, 3) body to space. Returns m(t) of shape
-    t.shape + (3,), or (m(t), Q(t)) with Q(t) of shape t.shape + (3, 3). Any inertia (the
-    Jacobi elliptic solution, see the module docstring); one evaluation per output time, its
-    cost independent of t. Plain JAX: ``jit``, ``vmap`` over bodies, states and times, and
-    ``grad`` with respect to the inertia and the initial state work. A quaternion attitude:
-    compare rotation matrices (``quaternion_to_matrix``), the sign of q(t) is the integrator's.
+    t.shape + (3,), or (m(t), Q(t)) with Q(t) of shape t.shape + (3, 3). Any positive moments
+    (the Jacobi elliptic solution, see the module docstring): bare moments must be a physical
+    body, a non-physical one is passed built with ``allow_nonphysical=True``. One evaluation
+    per output time, its cost independent of t. Plain JAX: ``jit``, ``vmap`` over bodies,
+    states and times, and ``grad`` with respect to the inertia and the initial state work. A
+    quaternion attitude: compare rotation matrices (``quaternion_to_matrix``), the sign of
+    q(t) is the integrator's.
 
     >>> import jax.numpy as jnp, jaxsplit
-    >>> inertia, m0 = jnp.array([2.0, 1.0, 2 / 3]), jnp.array([0.4, -0.3, 0.8])
-    >>> m = jaxsplit.exact_solution(inertia, m0, jnp.array([0.0, 1.0, 10.0]))   # one evaluation per time
+    >>> body = jaxsplit.RigidBody(jnp.array([2.0, 1.0, 2 / 3]), allow_nonphysical=True)  # 1 + 2/3 < 2
+    >>> m0 = jnp.array([0.4, -0.3, 0.8])
+    >>> m = jaxsplit.exact_solution(body, m0, jnp.array([0.0, 1.0, 10.0]))   # one evaluation per time
     >>> m
     Array([[ 0.4       , -0.3       ,  0.8       ],
            [ 0.23342137, -0.54866103,  0.73108518],
            [ 0.39690723,  0.30810599,  0.79845811]], dtype=float64)
-    >>> step = jaxsplit.roll(jaxsplit.splitting(jaxsplit.RigidBody(inertia), "kahan-li-8"))  # compiles fast
+    >>> step = jaxsplit.roll(jaxsplit.splitting(body, "kahan-li-8"))  # compiles fast
     >>> m10 = jaxsplit.integrate(step, m0, 0.01, 1000).final
     >>> float(jnp.max(jnp.abs(m10 - m[2]))) < 1e-13                   # m(10) against Kahan–Li 8
     True
     """
     # a system's moments were checked when it was built (a non-physical body by request)
-    inertia = check_inertia(body.inertia, allow_nonphysical=True) if hasattr(body, "inertia") else RigidBody(body).inertia
+    inertia = check_inertia(body.inertia, allow_nonphysical=True) if hasattr(body, "inertia") else as_body(body).inertia
     if inertia.shape != (3,):
         raise InputError(f"exact_solution takes one body, inertia of shape (3,), got {tuple(inertia.shape)} "
                          "(jax.vmap over bodies)")

@@ -30,7 +30,7 @@ class GravityGradient(BodyInPotential):
     parameter is traced. ``allow_nonphysical`` as for ``RigidBody``.
 
     >>> import jax.numpy as jnp, jaxsplit
-    >>> satellite = jaxsplit.gravity_gradient(jnp.array([2.0, 1.0, 2 / 3]), 0.1)
+    >>> satellite = jaxsplit.gravity_gradient(jnp.array([2.0, 1.0, 2 / 3]), 0.1, allow_nonphysical=True)
     >>> sorted(satellite.splits())
     ['axes', 'symmetric']
     """
@@ -38,7 +38,7 @@ class GravityGradient(BodyInPotential):
     inertia: jax.Array
     rate: jax.Array
 
-    def __init__(self, inertia, rate, allow_nonphysical: bool | None = None):
+    def __init__(self, inertia, rate, allow_nonphysical: bool = False):
         self.inertia = check_inertia(inertia, allow_nonphysical=flag(allow_nonphysical))
         self.rate = check_non_negative(rate, "rate")
         check_batches(inertia=self.inertia.shape[:-1], rate=self.rate.shape)
@@ -60,11 +60,11 @@ class GravityGradient(BodyInPotential):
         return spin * eye, eye
 
 
-def gravity_gradient(inertia, rate, *, allow_nonphysical: bool | None = None) -> GravityGradient:
+def gravity_gradient(inertia, rate, *, allow_nonphysical: bool = False) -> GravityGradient:
     """A satellite in the gravity-gradient field, state (m, Γ): V = (3/2) rate² ⟨Γ, IΓ⟩.
 
     >>> import jax.numpy as jnp, jaxsplit
-    >>> satellite = jaxsplit.gravity_gradient(jnp.array([2.0, 1.0, 2 / 3]), rate=0.1)
+    >>> satellite = jaxsplit.gravity_gradient(jnp.array([2.0, 1.0, 2 / 3]), rate=0.1, allow_nonphysical=True)
     >>> x0 = (jnp.zeros(3), jnp.array([0.0, 0.6, 0.8]))            # at rest in the body, Γ toward the planet
     >>> m, gamma = jaxsplit.integrate(jaxsplit.splitting(satellite, "strang"), x0, 0.1, 500).final
     >>> abs(float(gamma @ gamma) - 1) < 1e-13

@@ -26,7 +26,7 @@ import numpy as np
 
 from ..core._errors import InputError
 from ._base import AbstractSystem
-from ._rigid_body import RigidBody
+from ._rigid_body import as_body
 from .so3 import hat
 
 Partial = jax.tree_util.Partial
@@ -96,12 +96,12 @@ def rigid_body_system(inertia) -> HamiltonPoisson:
     """The free rigid body on so(3)* (``inertia`` or a ``RigidBody``), Casimir C = ½|m|².
 
     >>> import jax.numpy as jnp, jaxsplit
-    >>> system = jaxsplit.rigid_body_system(jnp.array([2.0, 1.0, 2 / 3]))
+    >>> system = jaxsplit.rigid_body_system(jaxsplit.STANDARD_CASE.body())      # I = (2, 1, 2/3)
     >>> system.vector_field(jnp.array([0.4, -0.3, 0.8]))
     Array([-0.12, -0.32, -0.06], dtype=float64)
     >>> float(jaxsplit.poisson_defect(jaxsplit.explicit_euler(system), system, jnp.array([0.4, -0.3, 0.8]), 0.1))
     0.00156..."""
-    body = inertia if isinstance(inertia, RigidBody) else RigidBody(inertia)
+    body = as_body(inertia)
     return HamiltonPoisson(hat, Partial(_rb_energy, body.inertia), (("casimir", _half_square),),
                            "rigid-body")
 

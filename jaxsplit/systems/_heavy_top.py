@@ -31,7 +31,8 @@ class HeavyTop(BodyInPotential):
     ``allow_nonphysical`` as for ``RigidBody`` (a body violating the triangle inequalities).
 
     >>> import jax.numpy as jnp, jaxsplit
-    >>> top = jaxsplit.heavy_top(jnp.array([2.0, 1.0, 2 / 3]), jnp.array([0.0, 0.0, 0.5]), 1.0)
+    >>> top = jaxsplit.heavy_top(jnp.array([2.0, 1.0, 2 / 3]), jnp.array([0.0, 0.0, 0.5]), 1.0,
+    ...                          allow_nonphysical=True)                  # 1 + 2/3 < 2: on purpose
     >>> sorted(top.splits()), sorted(top.casimirs())
     (['axes', 'symmetric'], ['<m,Gamma>', '|Gamma|^2'])
     """
@@ -40,7 +41,7 @@ class HeavyTop(BodyInPotential):
     center_of_mass: jax.Array
     weight: jax.Array
 
-    def __init__(self, inertia, center_of_mass, weight=1.0, allow_nonphysical: bool | None = None):
+    def __init__(self, inertia, center_of_mass, weight=1.0, allow_nonphysical: bool = False):
         self.inertia = check_inertia(inertia, allow_nonphysical=flag(allow_nonphysical))
         self.center_of_mass = check_vector(center_of_mass, "center_of_mass")
         self.weight = check_non_negative(weight, "weight")
@@ -67,11 +68,12 @@ class HeavyTop(BodyInPotential):
         return jnp.stack([spin * n, spin * n]), jnp.stack([n, -n])
 
 
-def heavy_top(inertia, center_of_mass, weight=1.0, *, allow_nonphysical: bool | None = None) -> HeavyTop:
+def heavy_top(inertia, center_of_mass, weight=1.0, *, allow_nonphysical: bool = False) -> HeavyTop:
     """The heavy top, state (m, Γ): H = Σ m_i²/(2I_i) + weight ⟨Γ, χ⟩ (see ``HeavyTop``).
 
     >>> import jax.numpy as jnp, jaxsplit
-    >>> top = jaxsplit.heavy_top(jnp.array([2.0, 1.0, 2 / 3]), jnp.array([0.0, 0.0, 0.5]), weight=1.0)
+    >>> top = jaxsplit.heavy_top(jnp.array([2.0, 1.0, 2 / 3]), jnp.array([0.0, 0.0, 0.5]), weight=1.0,
+    ...                          allow_nonphysical=True)                  # 1 + 2/3 < 2: on purpose
     >>> x0 = (jnp.array([0.4, -0.3, 0.8]), jnp.array([0.0, 0.6, 0.8]))        # (m, Γ), |Γ| = 1
     >>> round(float(top.hamiltonian(x0)), 12)
     0.965

@@ -6,7 +6,7 @@ compose them; the result is a ``Composition``, a pure ``step(state, h)``.
 
 from ..core._compose import Composition, compose
 from ._base import AbstractSystem
-from ._rigid_body import RigidBody
+from ._rigid_body import as_body
 from ._spin_pairs import PairExchange, laid_out
 
 
@@ -23,7 +23,7 @@ def splitting(system, scheme, split: str | None = None, *, merge_flows: bool | N
     >>> m1 = step(jnp.array([0.6, 0.0, 0.8]), 0.1)
     """
     if not isinstance(system, AbstractSystem):
-        system = RigidBody(system)
+        system = as_body(system)
     step = compose(system.split(split, **options), scheme, merge_flows=merge_flows)
     # a split whose flows run on a layout of their own (a spin lattice's components first,
     # ``_spin_pairs``): the state converted once per call or run, not once per flow
