@@ -25,10 +25,10 @@ CASES = {
     "heavy top": (lambda: jaxsplit.splitting(jaxsplit.heavy_top(INERTIA, jnp.array([0.0, 0.1, 0.4]), 1.3), "strang"),
                   (M, GAMMA)),
     "attitude": (lambda: jaxsplit.splitting(jaxsplit.attitude(INERTIA), "strang"), (M, Q)),
-    "spin lattice": (lambda: jaxsplit.splitting(jaxsplit.spin_lattice(jaxsplit.lattices.lattice("square", 4),
+    "spin lattice": (lambda: jaxsplit.splitting(jaxsplit.spin_lattice(jaxsplit.lattices.lattice("chain", 8),
                                                                       field=(0.0, 0.0, 0.3)),
                                                 "strang", "bonds"),
-                     jnp.asarray(rng.standard_normal((16, 3)))),
+                     jnp.asarray(rng.standard_normal((8, 3)))),
 }
 
 
