@@ -54,10 +54,14 @@ def test_fast_path_is_the_gather_path_to_round_off(name, size):
 
 
 def test_casimirs_and_poisson_defect_on_the_fast_path():
+    # the Poisson defect (jacfwd of the step) on the chain: the same pair kernel and site flows as
+    # on the cube, a fraction of its compilation (63 s of CPU on the cube, most of this file's)
+    chain, _ = _pair("chain", 8, **SITE_TERMS)
+    s0 = chain.random_state(seed=1)
+    assert float(jaxsplit.poisson_defect(jaxsplit.splitting(chain, "strang", "bonds"), chain, s0, 0.2)) < ROUND_OFF
     fast, _ = _pair("simple-cubic", 4, **SITE_TERMS)
     step = jaxsplit.splitting(fast, "strang", "bonds")
     s0 = fast.random_state(seed=1)
-    assert float(jaxsplit.poisson_defect(step, fast, s0, 0.2)) < ROUND_OFF
     x = jaxsplit.integrate(step, s0, 0.05, 2000).final
     assert float(jnp.max(jnp.abs(jnp.linalg.norm(x, axis=-1) / 1.3 - 1))) < ROUND_OFF
 
@@ -76,6 +80,13 @@ def test_schemes_batches_dtypes_and_gradients():
     assert out.shape == batch.shape and float(jnp.max(jnp.abs(out - one))) < ROUND_OFF
     single = jaxsplit.integrate(step, s0.astype(jnp.float32), 0.1, 4).final
     assert single.dtype == jnp.float32 and float(jnp.max(jnp.abs(single - out[0]))) < 1e-5
+
+    # gradients on the chain: the same pair kernel reversed, half the flows of the square (its
+    # gradients took 48 s of CPU each to trace and compile, two thirds of this file's time)
+    fast, gather = _pair("chain", 8)
+    s0 = fast.random_state(seed=2)
+    step = jaxsplit.splitting(fast, "strang", "bonds")
+    assert isinstance(step, LaidOut)
 
     def loss(x0, adjoint):
         return jnp.sum(jaxsplit.integrate(step, x0, 0.1, 6, adjoint=adjoint).final[:, 2])
