@@ -74,7 +74,7 @@ def test_long_horizon_gradient_matches_finite_differences():
     target = jnp.asarray(jaxsplit.STANDARD_CASE.reference)
 
     def loss(log_inertia, checkpointed=True):
-        step = jaxsplit.splitting(jaxsplit.RigidBody(jnp.exp(log_inertia)), "strang")
+        step = jaxsplit.splitting(jaxsplit.RigidBody(jnp.exp(log_inertia), allow_nonphysical=True), "strang")
         final = (jaxsplit.integrate_checkpointed(step, m0, h, n_steps) if checkpointed
                  else jaxsplit.integrate(step, m0, h, n_steps).final)
         return jnp.sum((final - target) ** 2)
@@ -89,7 +89,7 @@ def test_long_horizon_gradient_matches_finite_differences():
     fd = np.array([(value(x + FD_EPS * e) - value(x - FD_EPS * e)) / (2 * FD_EPS) for e in eye])
     assert np.max(np.abs(grad - fd)) < GRAD_RTOL * np.max(np.abs(grad))
     # forward values are those of integrate
-    step = jaxsplit.splitting(jaxsplit.RigidBody(jnp.exp(x)), "strang")
+    step = jaxsplit.splitting(jaxsplit.RigidBody(jnp.exp(x), allow_nonphysical=True), "strang")
     a = jax.jit(lambda y: jaxsplit.integrate_checkpointed(step, y, h, 1234, block=100))(m0)  # not jitted itself
     b = jaxsplit.integrate(step, m0, h, 1234).final
     assert np.max(np.abs(np.asarray(a) - np.asarray(b))) < CHECKPOINT_MATCH
@@ -100,7 +100,7 @@ def test_checkpointed_gradient_memory_grows_sublinearly():
 
     def temp_bytes(n, checkpointed):
         def loss(log_inertia):
-            step = jaxsplit.splitting(jaxsplit.RigidBody(jnp.exp(log_inertia)), "strang")
+            step = jaxsplit.splitting(jaxsplit.RigidBody(jnp.exp(log_inertia), allow_nonphysical=True), "strang")
             final = (jaxsplit.integrate_checkpointed(step, m0, 0.01, n) if checkpointed
                      else jaxsplit.integrate(step, m0, 0.01, n).final)
             return jnp.sum(final ** 2)
@@ -111,7 +111,10 @@ def test_checkpointed_gradient_memory_grows_sublinearly():
     small, large = 4_096, 65_536  # 16x the steps (perfect squares: whole blocks)
     ckpt_large = temp_bytes(large, True)  # compiled once, used by both checks
     assert ckpt_large / temp_bytes(small, True) < 6  # blocks of sqrt(n): ~sqrt(16) = 4, far from a linear law's 16
-    assert temp_bytes(large, False) > 50 * ckpt_large  # the plain scan stores every step
+    # the stored adjoint keeps one state in KEEP_EVERY: linear in n (16x the steps, > 8x the memory), and
+    # at 65,536 steps above the checkpointed run's sqrt-sized blocks
+    plain_large = temp_bytes(large, False)
+    assert plain_large > 8 * temp_bytes(small, False) and plain_large > 2 * ckpt_large
 
 
 @SHARED_FIT

@@ -209,6 +209,6 @@ def test_fit_inertia_refuses_degenerate_or_bad_data(t, m, kwargs, words):
 def test_generic_fit_and_simulate_bound_the_model_steps():
     from jaxsplit.explore._fit import simulate
 
-    _refused(lambda: simulate(RigidBody, jnp.array([2.0, 1.0, 0.5]), M0, _T, max_step=1e-300), "max_step",
+    _refused(lambda: simulate(RigidBody, jnp.array([2.0, 1.5, 1.0]), M0, _T, max_step=1e-300), "max_step",
              "2,147,483,647")
     _refused(lambda: jaxsplit.fit(RigidBody, _T, _MOVING, jnp.array([2.0, 1.0, 0.5]), max_step=-1.0), "max_step")
