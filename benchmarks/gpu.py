@@ -35,7 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import header, log, machine_info, write
+from _common import header, interleaved, log, machine_info, write
 from _spin_kernels import fused_run
 from spin_scale import STATE_BYTES, SUB_FLOWS, H, build
 
@@ -44,20 +44,11 @@ import jaxsplit
 STEPS = {100: 40, 216: 20, 464: 10}
 
 
-def best_wall(fn, rounds=3):
-    times = []
-    for _ in range(rounds):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return min(times)
-
-
 def copy_bandwidth(n=2**27):
     x = jnp.ones(n)
     twice = jax.jit(lambda a: 2.0 * a)
     twice(x).block_until_ready()
-    return 2 * x.nbytes / best_wall(lambda: twice(x).block_until_ready(), 5)
+    return 2 * x.nbytes / min(interleaved({"copy": lambda: twice(x).block_until_ready()}, 5)["copy"])
 
 
 def spin_row(size: int, bw: float) -> dict:
@@ -77,10 +68,7 @@ def spin_row(size: int, bw: float) -> dict:
     ref = theirs()
     diff = float(jnp.max(jnp.abs(got - ref.reshape(3, -1).T)))
     del got, ref
-    times = {"jaxsplit": [], "hand-fused JAX": []}
-    for _ in range(3):  # interleaved rounds
-        for name, fn in (("jaxsplit", ours), ("hand-fused JAX", theirs)):
-            times[name].append(best_wall(fn, 1))
+    times = interleaved({"jaxsplit": ours, "hand-fused JAX": theirs}, 3)
     n_spins = size**3
     rates = {k: n_spins * n / min(v) for k, v in times.items()}
     bound = bw / (2 * STATE_BYTES * SUB_FLOWS)

@@ -8,7 +8,6 @@ hand-fused loop of ``throughput.py``; wall time, best of 3.
 
 import contextlib
 import sys
-import time
 from pathlib import Path
 
 import jax
@@ -18,6 +17,7 @@ import jax.numpy as jnp
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import throughput
+from _common import interleaved
 
 import jaxsplit
 from jaxsplit.core._loops import select_form
@@ -26,13 +26,9 @@ B, N = (10**4, 200) if "--quick" in sys.argv else (10**6, 2000)
 
 
 def best(fn, rounds=3):
+    """Wall seconds of ``fn()``, the best of ``rounds`` after a warm-up call."""
     fn()
-    times = []
-    for _ in range(rounds):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return min(times)
+    return min(interleaved({"run": fn}, rounds)["run"])
 
 
 def main():

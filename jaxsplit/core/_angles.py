@@ -42,14 +42,20 @@ def short_angles():
 
 
 @contextlib.contextmanager
-def assuming(limit):
-    """Trace under ``short_angles() == limit`` (None: the general kernel). Also for a rule
-    JAX traces after its call (``_loops._repeated``'s JVP), outside the ``cond`` that set it."""
-    token = _SHORT.set(limit)
+def setting(var, value):
+    """``var`` (a ``contextvars.ContextVar``) set to ``value`` inside the block: the trace-time
+    switches of ``core`` (this module's bound, ``_loops``' forms)."""
+    token = var.set(value)
     try:
         yield
     finally:
-        _SHORT.reset(token)
+        var.reset(token)
+
+
+def assuming(limit):
+    """Trace under ``short_angles() == limit`` (None: the general kernel). Also for a rule
+    JAX traces after its call (``_loops._repeated``'s JVP), outside the ``cond`` that set it."""
+    return setting(_SHORT, limit)
 
 
 def largest(x):

@@ -36,7 +36,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ._angles import assuming, short_angles
+from ._angles import assuming, setting, short_angles
 from ._one_kernel import one_kernel, one_kernel_jvp
 
 _SELECTS = contextvars.ContextVar("jaxsplit_selects", default=False)
@@ -44,17 +44,8 @@ _PLAIN = contextvars.ContextVar("jaxsplit_plain_loops", default=False)
 _FORM = contextvars.ContextVar("jaxsplit_select_form", default=None)
 
 
-@contextlib.contextmanager
-def _set(var, value):
-    token = var.set(value)
-    try:
-        yield
-    finally:
-        var.reset(token)
-
-
 def _switched_on(flag):
-    return _set(flag, True)
+    return setting(flag, True)
 
 
 def selects() -> bool:
@@ -71,7 +62,7 @@ def select_form(on: bool = True):
     """Rotations traced inside jaxsplit's loops use the select form (``True``) or the stack form
     (``False``) whatever the backend; by default the select form on the CPU only (the module
     docstring)."""
-    return _set(_FORM, on)
+    return setting(_FORM, on)
 
 
 def _selecting() -> bool:
