@@ -346,14 +346,14 @@ def loop_kernels(fn, *args) -> dict:
 
 def kernel_profile(size: int, step, repeats: int, quick: bool) -> dict:
     """One colour flow (x bonds, parity 0) repeated n times: jaxsplit's fast path (pairs by
-    reshape, components first, the polynomial tier of h = 0.01 and the full-range kernel), its
+    reshape, components first, the polynomial tier and the full-range kernel), its
     gather path (the same system with one J per bond: gather + turn), variants of the gather
     path's rotation, and the hand-fused one; ns per spin per colour flow, interleaved rounds."""
     from _spin_kernels import _fused_colour, _half_polynomials, half_angle_terms
 
     from jaxsplit import lattices, systems
     from jaxsplit.systems._spin_flows import turn  # the rotation jaxsplit's gather-path bond flows use
-    from jaxsplit.systems._spin_pairs import Components, _kernel
+    from jaxsplit.systems._spin_pairs import TIERS, Components, _kernel
 
     n = 20 if quick else 200
     fast = step.flows[0]
@@ -388,7 +388,7 @@ def kernel_profile(size: int, step, repeats: int, quick: bool) -> dict:
     cases = {
         "jaxsplit's colour flow, fast path (PairExchange: pairs by reshape, components first, tier switch)":
             (lambda s: fast(Components(s), t).array, first),
-        "its kernel alone, polynomial tier of h = 0.01 (|φ| <= 1/16), no switch": (lambda s: _kernel(s, t, 3, 0, 0, 2.0**-4), first),
+        "its kernel alone, the polynomial tier (|φ| <= 2), no switch": (lambda s: _kernel(s, t, 3, 0, 0, TIERS[0]), first),
         "its kernel alone, full range (sqrt, so3.half_turn, division)": (lambda s: _kernel(s, t, 3, 0, 0, None), first),
         "jaxsplit's gather path (BondExchange: gather + turn)": (lambda s: flow(s, t), spins),
         "its gather alone (jnp.take of the partners, (N, 3))": (lambda s: jnp.take(s, partner, axis=0), spins),
