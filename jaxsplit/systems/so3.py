@@ -126,30 +126,41 @@ def _economized(offset: int, limit, tolerance: float, degree: int = 22) -> tuple
 
 def _rounded(value: Fraction, bits: int) -> Fraction:
     """``value`` rounded to ``bits`` significant bits."""
-    scale = Fraction(2) ** (bits - 1 - math.floor(math.log2(value)))
+    scale = Fraction(2) ** (bits - 1 - math.floor(math.log2(abs(value))))
     return Fraction(round(value * scale)) / scale
+
+
+# |n| = |round(φ/π)| below 2^k keeps every product n·piece exact (float64: every angle to 10¹²,
+# float32: to ~10⁵, past which φ's own rounding exceeds the reduction's error anyway)
+EXACT_TURNS = {"float64": 39, "float32": 16}
 
 
 @functools.cache
 def _kernel_constants(dtype_name: str):
-    """(π in three pieces, 1/π, the reduced range's bound, cos coefficients, sin/φ coefficients)
-    for one floating dtype.
+    """(π in pieces, 1/π, the reduced range's bound, cos coefficients, sin/φ coefficients) for
+    one floating dtype.
 
-    The first two pieces of π carry ``digits − 21`` bits (at least 8; Cody–Waite), so n·piece
-    is exact for |n| < 2^k, k = 21 for float64 and 16 for float32, and r = φ − nπ is as
-    accurate as φ itself there; beyond, φ's own rounding already exceeds the reduction's error.
+    Cody–Waite: every piece but the last carries ``digits − k`` bits (k = ``EXACT_TURNS``), so
+    n·piece is exact for |n| < 2^k and each r − n·piece rounds once, with or without a fused
+    multiply-add (the three pieces of 32 bits used before relied on the CPU compiler contracting
+    them into FMAs: unoptimised, or on a GPU, cos was wrong by 3e7 ulp at φ ~ 1e8); the last
+    piece is the rest of π at the dtype's precision, after enough exact pieces that its product's
+    error, n·|rest|·eps/2, is below a quarter of eps. r = φ − nπ is then as accurate as φ itself.
     n = round(φ/π) is computed in the dtype, so |r| may exceed π/2 by the rounding of φ/π,
     at most 2^k·eps·π: the polynomials' range (and the clip in ``half_turn``) includes that
     margin, and their error there is below a quarter of the dtype's epsilon."""
     info = np.finfo(dtype_name)
-    bits = max(info.nmant + 1 - 21, 8)
-    exact = info.nmant + 1 - bits
-    first = _rounded(_PI, bits)
-    second = _rounded(_PI - first, bits)
-    third = _PI - first - second
+    digits, k = info.nmant + 1, EXACT_TURNS[dtype_name]
+    bits = digits - k
+    pieces, rest = [], _PI
+    while len(pieces) * bits < k + 2:  # then n·(π − Σ pieces) <= 2^k·2^-(k+2)·π·eps
+        piece = _rounded(rest, bits)
+        pieces.append(piece)
+        rest -= piece
+    pieces.append(rest)
     tolerance = float(info.eps) / 4
-    limit = _PI / 2 + Fraction(2) ** exact * Fraction(float(info.eps)) * _PI
-    return ((float(first), float(second), float(third)), float(1 / _PI), float(limit),
+    limit = _PI / 2 + Fraction(2) ** k * Fraction(float(info.eps)) * _PI
+    return (tuple(float(p) for p in pieces), float(1 / _PI), float(limit),
             _economized(0, limit, tolerance), _economized(1, limit, tolerance))
 
 
@@ -173,7 +184,7 @@ def half_turn(phi):
 
     Rotations by θ = 2φ use only 2sc = sin θ and 2s² = 1 − cos θ (``half_cos_sin``), which the
     common sign leaves unchanged, so φ is reduced modulo π, not 2π: n = round(φ/π),
-    r = φ − nπ in three Cody–Waite pieces (``_kernel_constants``), then (cos r, r·p(r²)) by
+    r = φ − nπ in Cody–Waite pieces (``_kernel_constants``), then (cos r, r·p(r²)) by
     polynomials in r² accurate to a quarter of the dtype's epsilon on |r| <= π/2, with no
     branch, table or select: the same straight-line code for every angle, batch and
     transformation. Measured in ``tests/test_kernel.py``: within 2 ulp of NumPy's cos and sin
