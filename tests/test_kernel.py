@@ -220,10 +220,9 @@ def test_a_run_picks_its_kernel_inside_the_program_from_its_largest_angle():
     step = jaxsplit.splitting(STANDARD, "kahan-li-8", "casimir")
     unit = float(step.turn_rate(M0)) / 2  # half angle per unit h
     choose = jax.jit(lambda x, h: _kernel_of_run(step, x, h))
-    for limit in SHORT_LIMITS:
+    for limit, next_one in zip(SHORT_LIMITS, SHORT_LIMITS[1:] + (0,), strict=True):  # 0: the general kernel
         assert float(choose(M0, 0.99 * float(limit) / unit)) == float(limit)
-    assert float(choose(M0, 1.01 * float(SHORT_LIMITS[0]) / unit)) == float(SHORT_LIMITS[1])
-    assert float(choose(M0, 1.01 * float(SHORT_LIMITS[-1]) / unit)) == 0.0
+        assert float(choose(M0, 1.01 * float(limit) / unit)) == float(next_one)
     assert float(choose(M0, jnp.nan)) == 0.0 and float(choose(M0 * jnp.inf, 0.1)) == 0.0
     # one body with a large |m| in a batch moves the whole batch to the general kernel
     small_h = 0.5 * float(SHORT_LIMITS[0]) / unit
@@ -245,7 +244,7 @@ def test_every_kernel_gives_the_general_kernels_run_to_round_off():
     unit = float(step.turn_rate(M0)) / 2
     states = jnp.stack([M0, M0 * 0.9, M0[::-1]])
     run = lambda x, h: jaxsplit.integrate(step, x, h, 40).final
-    for h in (0.5 * float(angles.SHORT_LIMITS[0]) / unit, 0.5 * float(angles.SHORT_LIMITS[1]) / unit):
+    for h in [0.5 * float(limit) / unit for limit in angles.SHORT_LIMITS]:
         tiered = jax.jit(run)(states, h)
         saved = angles.SHORT_LIMITS
         try:

@@ -2,7 +2,7 @@
 
 Every rotation's trigonometry is ``so3.half_turn``: valid for every angle, a reduction modulo
 π and polynomials of 9 + 9 terms on |r| <= π/2 (float64). Most runs turn by far less (256
-free bodies, h = 0.01: half angles below 0.01), where 4 + 4 terms with no reduction are exact
+free bodies, h = 0.01: half angles below 0.01), where a few terms with no reduction are exact
 to the same quarter epsilon: with them the direct call on 256 free bodies ran 2.1–2.6× faster
 than with the general kernel alone (``benchmarks/results/against_before.md`` at 2857ec7 and
 1f7e0c8, as imported). The choice must not depend on values
@@ -27,11 +27,13 @@ import jax
 import jax.numpy as jnp
 from jax.custom_batching import custom_vmap
 
-# The bounds on |φ| with a loop of their own, shortest first: 4 + 4 terms in float64 for
-# |φ| <= 1/16 (256 free bodies, h = 0.01: 10 % faster than 5 + 5 at 1/8), 6 + 5 for 1/4 (Kahan–Li 8
-# at h = 0.4 on the standard body, the work-precision study's coarse end, reaches ~0.08); each
-# tier is one more loop to compile. Beyond the last, the general kernel.
-SHORT_LIMITS = (Fraction(1, 16), Fraction(1, 4))
+# The bounds on |φ| with a loop of their own, shortest first; beyond the last, the general kernel.
+# One: 6 + 5 terms in float64 for |φ| <= 1/4 (Kahan–Li 8 at h = 0.4 on the standard body, the
+# work-precision study's coarse end, reaches ~0.08). A shorter tier (4 + 4 terms, |φ| <= 1/16) ran
+# no faster and each tier is one more loop to compile (2026-11-27, 2000 steps at h = 0.01, median
+# of 9: 256 free bodies 2.22 ms both, one body Kahan–Li 8 2.02 and 2.00 ms, 256 heavy tops 23.0 and
+# 22.7 ms; compile 0.81 -> 0.46 s, 0.55 -> 0.38 s, 0.87 -> 0.74 s).
+SHORT_LIMITS = (Fraction(1, 4),)
 
 _SHORT = contextvars.ContextVar("jaxsplit_short_angles", default=None)
 

@@ -32,7 +32,7 @@ kernel serves every angle: a Cody–Waite reduction modulo π and polynomials of
 on |r| <= π/2 (the Taylor series economized in Chebyshev polynomials, in exact arithmetic,
 to a quarter of the dtype's epsilon). A run of ``integrate`` whose flows are all rotations of
 m (|m| kept) also compiles its loop with shorter polynomials and no reduction, for half
-angles up to 1/16 and 1/4, and picks one inside the compiled program from its largest angle
+angles up to 1/4 (``core._angles.SHORT_LIMITS``), and picks it inside the compiled program from its largest angle
 (``core._angles``): the direct call on 256 free bodies 2.1–2.6× faster. Nothing is chosen from values seen at a
 call, so a flow compiles to the same program whether ``integrate`` is called directly or
 under a user's ``jit``, ``vmap`` or ``grad``; a batch is the leading axes of the state, and
