@@ -14,7 +14,7 @@ import pytest
 
 import jaxsplit
 from jaxsplit.lattices import lattice
-from jaxsplit.systems._spin_pairs import TIERS, LaidOut, PairExchange
+from jaxsplit.systems._spin_pairs import TIERS, LaidOut, PairExchange, _kernel, _pair_flow
 
 ROUND_OFF = 1e-13
 SITE_TERMS = {"field": (0.1, -0.2, 0.3), "anisotropy": 0.4, "axis": (1.0, 1.0, 1.0)}
@@ -51,6 +51,24 @@ def test_fast_path_is_the_gather_path_to_round_off(name, size):
     for f, g in zip(step.flows, reference.flows, strict=True):
         for t in (0.37, 4.0):
             assert float(jnp.max(jnp.abs(jax.jit(f)(s0, t) - jax.jit(g)(s0, t)))) < 1e-14
+
+
+def test_the_closed_form_derivative_is_the_switchs_derivative():
+    """The pair flow's JVP (closed form, ``_pair_flow_jvp``) against JAX differentiating the kernel
+    itself, in the polynomial tier and the full-range kernel, both parities, with tangents in the
+    state and in J t (what gradients in h and J see)."""
+    x = jnp.asarray(np.random.default_rng(5).normal(size=(3, 8)))
+    dx = jnp.asarray(np.random.default_rng(6).normal(size=(3, 8)))
+    for parity in (0, 1):
+        for jt, tier in ((0.3, 0), (2.9, len(TIERS))):
+            kernel = lambda y, t, limit=(TIERS + (None,))[tier]: _kernel(y, t, 1, 0, parity, limit)
+            flow = lambda y, t, tier=tier: _pair_flow(y, t, jnp.int32(tier), 1, 0, parity)
+            (_, expected), (_, found) = (jax.jvp(f, (x, jt), (dx, 0.7)) for f in (kernel, flow))
+            assert float(jnp.max(jnp.abs(found - expected))) <= ROUND_OFF * float(jnp.max(jnp.abs(expected))), (parity, tier)
+            # must fail: the derivative of the other tier's polynomial where it does not apply
+            if tier:
+                wrong = jax.jvp(lambda y, t: _kernel(y, t, 1, 0, parity, TIERS[0]), (x, jt), (dx, 0.7))[1]
+                assert float(jnp.max(jnp.abs(wrong - expected))) > 1e-6
 
 
 def test_casimirs_and_poisson_defect_on_the_fast_path():

@@ -134,9 +134,65 @@ class PairExchange(AbstractFlow):
         # fusions (six separate outputs gave nine kernels, the coefficients again per output),
         # and neither a concatenate (jnp.roll) nor a pad/select roll fuses into the kernel: parity 1
         # keeps its two roll passes (a pad/select roll along the last axis was 2× slower).
-        branches = [functools.partial(_kernel, d=len(self.shape), axis=self.axis, parity=self.parity, limit=limit)
-                    for limit in TIERS + (None,)]
-        return Components(jax.lax.switch(tier, branches, x, jt))
+        return Components(_pair_flow(x, jt, tier, len(self.shape), self.axis, self.parity))
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(3, 4, 5))
+def _pair_flow(x, jt, tier, d, axis, parity):
+    """The colour's flow, the kernel of tier ``tier`` (``TIERS``; past the last, the full range)."""
+    branches = [functools.partial(_kernel, d=d, axis=axis, parity=parity, limit=limit) for limit in TIERS + (None,)]
+    return jax.lax.switch(tier, branches, x, jt)
+
+
+@_pair_flow.defjvp
+def _pair_flow_jvp(d, axis, parity, primals, tangents):
+    """The flow's derivative in closed form: differentiating the switch instead linearised every
+    branch (the full-range kernel's reduction, square root and division included), which took most
+    of a gradient's tracing and compilation (Strang on a chain of 8, reversible gradient of 6 steps:
+    lower 3.9 s + compile 4.5 s). With a' = a − 2 (A u − B w), u = s × a, w = s × u, A = k Q1(z),
+    B = k² Q2(z), z = k²|s|², k = J t / 2:
+    da' = da − 2 (dA u + A du − dB w − B dw), db' = ds − da', dz = 2 k dk |s|² + 2 k² s·ds."""
+    x, jt, tier = primals
+    dx, djt, _ = tangents
+    a, _, s, restore = _ends(x, d, axis, parity)
+    da, _, ds, _ = _ends(dx, d, axis, parity)
+    k, dk = 0.5 * jt, 0.5 * djt
+    norm2 = s[0] * s[0] + s[1] * s[1] + s[2] * s[2]
+    z = (k * k) * norm2
+    slopes = [functools.partial(_coefficients_and_slopes, limit=limit, dtype=x.dtype) for limit in TIERS + (None,)]
+    q1, q2, q1z, q2z = jax.lax.switch(tier, slopes, z)
+    A, B = k * q1, (k * k) * q2
+    dz = 2 * k * dk * norm2 + 2 * (k * k) * (s[0] * ds[0] + s[1] * ds[1] + s[2] * ds[2])
+    dA = dk * q1 + k * q1z * dz
+    dB = 2 * k * dk * q2 + (k * k) * q2z * dz
+    u, w = _cross(s, a), _cross(s, _cross(s, a))
+    du = tuple(p + q for p, q in zip(_cross(ds, a), _cross(s, da), strict=True))
+    dw = tuple(p + q for p, q in zip(_cross(ds, u), _cross(s, du), strict=True))
+    new_da = tuple(da[i] - 2 * (dA * u[i] + A * du[i] - dB * w[i] - B * dw[i]) for i in range(3))
+    new_db = tuple(ds[i] - new_da[i] for i in range(3))
+    return _pair_flow(x, jt, tier, d, axis, parity), restore(new_da, new_db)
+
+
+def _cross(p, q):
+    return p[1] * q[2] - p[2] * q[1], p[2] * q[0] - p[0] * q[2], p[0] * q[1] - p[1] * q[0]
+
+
+def _coefficients_and_slopes(z, limit, dtype):
+    """(Q1, Q2, dQ1/dz, dQ2/dz) with Q1 = q cos φ, Q2 = q², q = sin φ/φ, z = φ² (``_pair_coefficients``
+    without the factors of k): from the polynomials on |φ| <= ``limit`` and their derivatives, or
+    (``limit`` None) from the full-range kernel, where d cos φ/dz = −q/2 and dq/dz = (cos φ − q)/(2z)."""
+    if limit is None:
+        tiny = jnp.finfo(dtype).tiny
+        inverse = jax.lax.rsqrt(z + tiny)
+        c, s = half_turn((z + tiny) * inverse)  # ±(cos φ, sin φ): every product below has the sign twice
+        q = s * inverse
+        q_z = (c - q) / (2 * (z + tiny))
+        return q * c, q * q, q_z * c - 0.5 * q * q, 2 * q * q_z
+    cos_c, sin_c = _coefficients(limit, np.dtype(dtype).name)
+    c, q = _horner(cos_c, z), _horner(sin_c, z)
+    c_z = _horner(tuple(i * a for i, a in enumerate(cos_c))[1:], z)
+    q_z = _horner(tuple(i * a for i, a in enumerate(sin_c))[1:], z)
+    return q * c, q * q, q_z * c + q * c_z, 2 * q * q_z
 
 
 def _ends(x, d, axis, parity):
