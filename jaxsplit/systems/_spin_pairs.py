@@ -93,17 +93,21 @@ class PairLayout:
         return y.reshape(y.shape[:-1 - d] + shape[len(shape) - 1 - self._site_axes(shape):])
 
 
-def _pair_coefficients(z, k, limit, dtype):
-    """(A, B) = (k q cos φ, k² q²), q = sin φ/φ, from z = φ² (polynomials on |φ| <= limit;
-    ``limit`` None: the full-range kernel)."""
+def _cos_and_q(z, limit, dtype):
+    """±(cos φ, q = sin φ/φ) from z = φ² (polynomials on |φ| <= ``limit``; ``limit`` None: the
+    full-range kernel, whose one sign for both cancels in every product of the two)."""
     if limit is None:
         tiny = jnp.finfo(dtype).tiny
         inverse = jax.lax.rsqrt(z + tiny)
-        c, s = half_turn((z + tiny) * inverse)  # ±(cos φ, sin φ), one sign: it cancels below
-        q = s * inverse
-    else:
-        cos_c, sin_c = _coefficients(limit, np.dtype(dtype).name)
-        c, q = _horner(cos_c, z), _horner(sin_c, z)
+        c, s = half_turn((z + tiny) * inverse)
+        return c, s * inverse
+    cos_c, sin_c = _coefficients(limit, np.dtype(dtype).name)
+    return _horner(cos_c, z), _horner(sin_c, z)
+
+
+def _pair_coefficients(z, k, limit, dtype):
+    """(A, B) = (k q cos φ, k² q²), q = sin φ/φ, from z = φ² (``_cos_and_q``)."""
+    c, q = _cos_and_q(z, limit, dtype)
     return k * (q * c), (k * k) * (q * q)
 
 
@@ -165,7 +169,8 @@ def _pair_flow_jvp(d, axis, parity, primals, tangents):
     dz = 2 * k * dk * norm2 + 2 * (k * k) * (s[0] * ds[0] + s[1] * ds[1] + s[2] * ds[2])
     dA = dk * q1 + k * q1z * dz
     dB = 2 * k * dk * q2 + (k * k) * q2z * dz
-    u, w = _cross(s, a), _cross(s, _cross(s, a))
+    u = _cross(s, a)
+    w = _cross(s, u)
     du = tuple(p + q for p, q in zip(_cross(ds, a), _cross(s, da), strict=True))
     dw = tuple(p + q for p, q in zip(_cross(ds, u), _cross(s, du), strict=True))
     new_da = tuple(da[i] - 2 * (dA * u[i] + A * du[i] - dB * w[i] - B * dw[i]) for i in range(3))
@@ -179,19 +184,14 @@ def _cross(p, q):
 
 def _coefficients_and_slopes(z, limit, dtype):
     """(Q1, Q2, dQ1/dz, dQ2/dz) with Q1 = q cos φ, Q2 = q², q = sin φ/φ, z = φ² (``_pair_coefficients``
-    without the factors of k): from the polynomials on |φ| <= ``limit`` and their derivatives, or
-    (``limit`` None) from the full-range kernel, where d cos φ/dz = −q/2 and dq/dz = (cos φ − q)/(2z)."""
+    without the factors of k): the derivatives of the polynomials on |φ| <= ``limit``, or (``limit``
+    None, the full-range kernel) d cos φ/dz = −q/2 and dq/dz = (cos φ − q)/(2z)."""
+    c, q = _cos_and_q(z, limit, dtype)
     if limit is None:
-        tiny = jnp.finfo(dtype).tiny
-        inverse = jax.lax.rsqrt(z + tiny)
-        c, s = half_turn((z + tiny) * inverse)  # ±(cos φ, sin φ): every product below has the sign twice
-        q = s * inverse
-        q_z = (c - q) / (2 * (z + tiny))
-        return q * c, q * q, q_z * c - 0.5 * q * q, 2 * q * q_z
-    cos_c, sin_c = _coefficients(limit, np.dtype(dtype).name)
-    c, q = _horner(cos_c, z), _horner(sin_c, z)
-    c_z = _horner(tuple(i * a for i, a in enumerate(cos_c))[1:], z)
-    q_z = _horner(tuple(i * a for i, a in enumerate(sin_c))[1:], z)
+        c_z, q_z = -0.5 * q, (c - q) / (2 * (z + jnp.finfo(dtype).tiny))
+    else:
+        cos_c, sin_c = _coefficients(limit, np.dtype(dtype).name)
+        c_z, q_z = (_horner(tuple(i * a for i, a in enumerate(cs))[1:], z) for cs in (cos_c, sin_c))
     return q * c, q * q, q_z * c + q * c_z, 2 * q * q_z
 
 
@@ -218,11 +218,10 @@ def _ends(x, d, axis, parity):
 
 def _turned(a, s, A, B):
     """The pair's new ends: a' = a − 2 (A s × a − B s × (s × a)), b' = s − a'."""
-    sx, sy, sz = s
-    cx, cy, cz = sy * a[2] - sz * a[1], sz * a[0] - sx * a[2], sx * a[1] - sy * a[0]
-    dx, dy, dz = sy * cz - sz * cy, sz * cx - sx * cz, sx * cy - sy * cx
-    new = (a[0] - 2 * (A * cx - B * dx), a[1] - 2 * (A * cy - B * dy), a[2] - 2 * (A * cz - B * dz))
-    return new, (sx - new[0], sy - new[1], sz - new[2])
+    u = _cross(s, a)
+    w = _cross(s, u)
+    new = tuple(a[i] - 2 * (A * u[i] - B * w[i]) for i in range(3))
+    return new, tuple(s[i] - new[i] for i in range(3))
 
 
 def _kernel(x, jt, d, axis, parity, limit):
