@@ -10,8 +10,9 @@ keeps one state per observation and, while differentiating an interval, its step
 ``"reversible"`` runs each interval through ``integrate``'s reversible adjoint
 (``core._adjoints``), which rebuilds the interval's states by stepping back: one state per
 observation, memory flat in the steps per interval (``benchmarks/results/fit_spins.md``). The misfit is the mean squared
-residual over every observed component; Adam, then optax's L-BFGS (zoom line search)
-minimise it, compiled once per configuration and data shape. The Gauss–Newton curvature
+residual over every observed component; Adam, then L-BFGS (``_minimise``: one loop that
+evaluates the loss and gradient at one place) minimise it, compiled once per configuration and
+data shape. The Gauss–Newton curvature
 JᵀJ of the residuals at the optimum gives the standard deviations (σ̂² (JᵀJ)⁻¹, σ̂² = RSS /
 (N − p)) and, through its eigenvalues and null vectors, what the data cannot determine.
 """
@@ -26,7 +27,6 @@ import jax
 import jax.flatten_util
 import jax.numpy as jnp
 import numpy as np
-import optax
 
 from .._bounds import count
 from ..core._adjoints import advance, check_adjoint
@@ -36,6 +36,7 @@ from ..core._schemes import schemes
 from ..core._state import as_state, float_dtype, leading_size
 from ..systems._splitting import splitting
 from ._batch import family_of, ravel_rows
+from ._minimise import minimise
 
 # ------------------------------------------------------------------ the model
 MAX_SUBSTEPS = 2**31 - 1  # lax.fori_loop counts an interval's model steps in int32
@@ -92,76 +93,6 @@ def predict(family, params, x0, dts, *, scheme, split=None, options=(), n_sub: i
 
     later = jax.lax.scan(interval, x0, dts)[1]
     return jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a[None], b]), x0, later)
-
-
-# ------------------------------------------------------------------ optimisers
-# XLA inlines every place a traced function is called, so each call site of the loss and of
-# its gradient compiles the whole integrator (forward and reverse) once more; the optimisers
-# below call them from as few places as optax allows.
-def adam(fun, params, steps: int, lr: float):
-    """``steps`` optax Adam steps on ``fun``, then fun's value and gradient where they end:
-    (params, value, gradient), all from one evaluation site (the last pass evaluates
-    without stepping), so that L-BFGS starts from them instead of evaluating again."""
-    opt = optax.adam(lr)
-    value_and_grad = jax.value_and_grad(fun)
-
-    def body(carry, k):
-        p, state, _, _ = carry
-        value, grad = value_and_grad(p)
-        updates, stepped = opt.update(grad, state, p)
-        keep = lambda new, old: jax.tree_util.tree_map(lambda a, b: jnp.where(k < steps, a, b), new, old)
-        return (keep(optax.apply_updates(p, updates), p), keep(stepped, state), value, grad), None
-
-    unset = jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), jax.eval_shape(value_and_grad, params))
-    start = (params, opt.init(params), *unset)
-    p, _, value, grad = jax.lax.scan(body, start, jnp.arange(steps + 1))[0]
-    return p, value, grad
-
-
-def lbfgs(fun, params, value, grad, max_iter: int, tol: float):
-    """optax L-BFGS with its zoom line search, as one ``lax.while_loop``, from ``params`` where
-    fun's ``value`` and ``grad`` are known: (params, iterations, value there). Each iteration
-    takes the value and gradient its line search found at the new point from the state (what
-    ``optax.value_and_grad_from_state`` does, without its call site for a missing value)."""
-    opt = optax.lbfgs()
-    state = opt.init(params)
-    state = optax.tree_utils.tree_set(
-        state, value=jnp.asarray(value, optax.tree_utils.tree_get(state, "value").dtype), grad=grad)
-
-    def body(carry):
-        p, state, k = carry
-        value, grad = optax.tree_utils.tree_get(state, "value"), optax.tree_utils.tree_get(state, "grad")
-        updates, state = opt.update(grad, state, p, value=value, grad=grad, value_fn=fun)
-        return optax.apply_updates(p, updates), state, k + 1
-
-    def cond(carry):
-        _, state, k = carry
-        gnorm = optax.tree_utils.tree_norm(optax.tree_utils.tree_get(state, "grad"))
-        return (k == 0) | ((k < max_iter) & (gnorm >= tol))
-
-    p, state, k = jax.lax.while_loop(cond, body, (params, state, 0))
-    return p, k, optax.tree_utils.tree_get(state, "value")
-
-
-def minimise(residuals, params, adam_steps: int, adam_lr: float, lbfgs_iter: int, tol: float):
-    """Adam, then L-BFGS, on the mean squared ``residuals(params)``: (params, L-BFGS iterations,
-    final loss), to trace inside a jit.
-
-    The loss is one ``jax.jit`` function so that Adam, L-BFGS and its line search all
-    differentiate a single traced loss (JAX caches a jitted function's trace, and its
-    derivatives, by identity): a heavy top's fit traced in 2.8 s instead of 7.1 s, results
-    unchanged to the last digit. Its value and gradient are called from three places (Adam's and
-    the two of optax's zoom line search), not four and a value: a heavy top's fit compiles in
-    about 15 % less time (4.6 / 5.6 / 3.8 s against 5.1 / 5.9 / 6.5 s, alternating runs on a
-    busy host); the optimum moves at round-off (L-BFGS starts from Adam's evaluation)."""
-
-    @jax.jit
-    def loss(p):
-        r = residuals(p)
-        return jnp.mean(r * r)
-
-    params, value, grad = adam(loss, params, adam_steps, adam_lr)
-    return lbfgs(loss, params, value, grad, lbfgs_iter, tol)
 
 
 # ------------------------------------------------------------------ the generic fit
@@ -263,7 +194,7 @@ def fit(family, t, observed, params0, *, x0=None, fit_x0: bool = True, fixed=Non
     that array, of any shape, and ``x0`` is needed). The model integrates ``scheme`` on
     ``split`` (with ``split_options``) with ⌈Δt / max_step⌉ steps per interval; ``adjoint``
     ("checkpoint" or "reversible", module docstring) is what its gradient stores. optax Adam
-    (``adam_steps``), then L-BFGS (``lbfgs_iter``), on the mean squared misfit; one
+    (``adam_steps``), then L-BFGS (``lbfgs_iter``, ``_minimise``), on the mean squared misfit; one
     compilation per model and data shape (the parameters and data are traced inside it).
     Returns a ``ParameterFit`` (concrete NumPy values) in the dtype of ``x0``.
 

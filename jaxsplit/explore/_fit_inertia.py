@@ -20,7 +20,7 @@ du ∝ −(I1, I2, I3); the Gauss–Newton Hessian of the misfit has it as its n
    (the inertia is parametrised by its logarithm, so it cannot turn negative). The start
    comes from integral matching: m_{k+1} − m_k ≈ ½Δt (A(m_k) + A(m_{k+1})) w is linear in
    w and is solved by least squares (minimum norm along the null direction). Then Adam,
-   then optax's L-BFGS minimise the mean squared misfit through the integrator.
+   then L-BFGS (``_minimise``) minimise the mean squared misfit through the integrator.
 2. *Gauge*: one extra piece of information fixes c in closed form, either a known kinetic
    energy E = ½ Σ w_i m0_i² (``energy=``, with its standard deviation ``energy_sigma``) or
    a known moment I1 (``inertia1=``). With neither, I1 = 1 (the data's units) is ASSUMED,
