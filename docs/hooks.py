@@ -106,14 +106,18 @@ def _scheme_table() -> str:
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
 CELL_TIMEOUT = 600  # seconds per cell
 _RUNNER = f"""
-import sys, nbformat
+import sys, tempfile, nbformat
+from jupyter_client import KernelManager
 from nbclient import NotebookClient
 nb = nbformat.read(sys.argv[1], as_version=4)
-NotebookClient(nb, timeout={CELL_TIMEOUT}, kernel_name="python3",
-               resources={{"metadata": {{"path": sys.argv[2]}}}}).execute()
+# IPC sockets in a folder of its own, not TCP ports: kernels started at once raced for the same
+# free port ("Address already in use")
+with tempfile.TemporaryDirectory() as sockets:
+    km = KernelManager(kernel_name="python3", transport="ipc", ip=sockets + "/kernel")
+    NotebookClient(nb, km=km, timeout={CELL_TIMEOUT}, kernel_name="python3",
+                   resources={{"metadata": {{"path": sys.argv[2]}}}}).execute()
 nbformat.write(nb, sys.argv[3])
 """
-
 
 def execute_notebooks(sources, out: pathlib.Path, small: bool = True) -> dict:
     """Execute every notebook at once (in parallel processes: compilation is single-threaded) into

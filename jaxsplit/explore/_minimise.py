@@ -12,9 +12,11 @@ L-BFGS (Nocedal & Wright, *Numerical Optimization*, 2nd ed., Alg. 7.4 and 7.5) k
 ``MEMORY`` pairs (s, y) with s·y > 0; its line search is their Alg. 3.5 (bracketing by doubling)
 and 3.6 (zoom by safeguarded cubic interpolation) for the strong Wolfe conditions with
 c₁ = 1e-4, c₂ = 0.9, or the approximate Wolfe conditions of Hager & Zhang (SIAM J. Optim. 16,
-2005), which accept a step whose decrease is below the round-off of f. A direction that does not descend, or a line search that finds no acceptable
-step in ``LINE_SEARCH_STEPS`` trials, drops the memory and retries along −∇f; the search stops
-there if −∇f finds no decrease either (the minimum is resolved to round-off).
+2005), which accept a step whose decrease is below the round-off of f. A line search that finds
+no acceptable step in ``LINE_SEARCH_STEPS`` trials takes its best step with sufficient decrease,
+or else drops the memory and retries along −∇f, and stops there if −∇f finds no decrease either
+(the minimum is resolved to round-off). The loop's branches are selects, not ``lax.cond``: the
+state is a few vectors, and every branch then compiles once.
 """
 
 from typing import NamedTuple
@@ -102,111 +104,99 @@ def _cubic_step(a_lo, f_lo, s_lo, a_hi, f_hi, s_hi):
     return jnp.where(good, a, 0.5 * (a_lo + a_hi))
 
 
+def _select(which, a, b):
+    """``a`` where ``which`` else ``b``, leaf by leaf (states of the same structure)."""
+    return jax.tree_util.tree_map(lambda u, v: jnp.where(which, u, v), a, b)
+
+
+def _search_step(st, f, g):
+    """One trial of the line search along d, with the value f and gradient g at x + a d:
+    (acceptable, the search's state for its next trial)."""
+    a, slope = st.a, jnp.vdot(g, st.d)
+    bad = ~jnp.isfinite(f) | ~jnp.isfinite(slope) | (f > st.f + C1 * a * st.slope0)
+    # strong Wolfe, or Hager–Zhang's approximate Wolfe conditions: near the minimum the
+    # decrease C1 a φ'(0) is below the round-off of f, which the exact test cannot see
+    approximate = ((f <= st.f + APPROX_DECREASE * jnp.abs(st.f)) & (slope >= C2 * st.slope0)
+                   & (slope <= (2 * APPROX_DELTA - 1) * st.slope0))
+    acceptable = (~bad & (jnp.abs(slope) <= -C2 * st.slope0)) | (jnp.isfinite(f) & approximate)
+    zooming = st.mode == ZOOM
+    # bracketing: too high, or no lower than the last trial -> [last, a]; rising -> [a, last];
+    # zooming: too high -> hi = a; else a is the new lo (hi = the old lo if the slope says so)
+    up = bad | (f >= st.f_lo) & (zooming | (st.trials > 0))
+    swap = ~up & (slope * (st.a_hi - st.a_lo) >= 0)
+    new, old_lo, old_hi = (a, f, slope), (st.a_lo, st.f_lo, st.s_lo), (st.a_hi, st.f_hi, st.s_hi)
+    lo = _select(up, (*old_lo, st.g_lo), (*new, g))
+    hi = _select(up, new, _select(zooming, _select(swap, old_lo, old_hi), old_lo))
+    # bracketing goes on (the step doubles) while the slope is negative and nothing failed
+    bracketed = zooming | up | (slope >= 0)
+    hi = _select(bracketed, hi, old_hi)
+    a = jnp.where(bracketed, _cubic_step(*lo[:3], *hi), GROWTH * a)
+    return acceptable, st._replace(mode=jnp.where(bracketed, ZOOM, BRACKET), a=a, z=st.x + a * st.d,
+                                   a_lo=lo[0], f_lo=lo[1], s_lo=lo[2], g_lo=lo[3], a_hi=hi[0], f_hi=hi[1],
+                                   s_hi=hi[2], trials=st.trials + 1)
+
+
 def minimise_flat(fun, x0, adam_steps: int, adam_lr: float, max_iter: int, tol: float):
     """``adam_steps`` Adam steps, then up to ``max_iter`` L-BFGS iterations (until |∇f| < tol) on
     ``fun`` of a flat vector: (x, L-BFGS iterations, fun(x)). One evaluation site (module
     docstring)."""
     value_and_grad = jax.value_and_grad(fun)
-    dtype = x0.dtype
-    zero = jnp.zeros((), dtype)
-    n = x0.shape[0]
+    dtype, n = x0.dtype, x0.shape[0]
+    zero, one, count = jnp.zeros((), dtype), jnp.ones((), dtype), jnp.zeros((), jnp.int32)
     opt = optax.adam(adam_lr)
-    # every evaluation Adam and L-BFGS may make (each iteration's line search gives up after
-    # LINE_SEARCH_STEPS trials, and may retry once along −∇f), in int32
+    # every evaluation Adam and L-BFGS may make (a line search gives up after LINE_SEARCH_STEPS
+    # trials and may retry once along −∇f), in int32
     max_evaluations = min(adam_steps + 1 + max_iter * 2 * LINE_SEARCH_STEPS, 2**31 - 1)
 
-    def begin_search(st, x, f, g, S, Y, rho, newest, k):
-        """A new line search from x along −H∇f (along −∇f, memory dropped, if that does not
-        descend); DONE when ∇f is small, the iterations are spent or f is not finite."""
-        d = _direction(g, S, Y, rho, newest)
-        slope = jnp.vdot(g, d)
-        steepest = ~(slope < 0)
-        rho = jnp.where(steepest, jnp.zeros_like(rho), rho)
+    def begin_search(st, x, f, g, k):
+        """A line search from x along −H∇f (along −∇f, memory dropped, if that does not descend);
+        DONE when ∇f is small, the iterations are spent or nothing descends."""
+        d = _direction(g, st.S, st.Y, st.rho, st.newest)
+        steepest = ~(jnp.vdot(g, d) < 0)
         d = jnp.where(steepest, -g / jnp.maximum(1.0, jnp.linalg.norm(g)), d)
         slope = jnp.vdot(g, d)
         done = (k >= max_iter) | (jnp.linalg.norm(g) < tol) | ~jnp.isfinite(f) | ~(slope < 0)
-        one = jnp.ones((), dtype)
         return st._replace(mode=jnp.where(done, DONE, BRACKET), z=x + d, x=x, f=f, g=g, d=d, slope0=slope, k=k,
                            a=one, a_lo=zero, f_lo=f, s_lo=slope, g_lo=g, a_hi=zero, f_hi=f, s_hi=slope,
-                           trials=jnp.zeros((), jnp.int32), S=S, Y=Y, rho=rho, newest=newest)
-
-    def accept(st, a, f, g):
-        """Step to x + a d, remember (s, y) if s·y > 0, begin the next line search."""
-        s = a * st.d
-        y = g - st.g
-        sy = jnp.vdot(s, y)
-        keep = sy > 0
-        slot = jnp.where(keep, (st.newest + 1) % MEMORY, st.newest)
-        S = jnp.where(keep, st.S.at[slot].set(s), st.S)
-        Y = jnp.where(keep, st.Y.at[slot].set(y), st.Y)
-        rho = jnp.where(keep, st.rho.at[slot].set(1.0 / jnp.where(keep, sy, 1.0)), st.rho)
-        return begin_search(st, st.x + s, f, g, S, Y, rho, slot, st.k + 1)
-
-    def give_up(st):
-        """No acceptable step in LINE_SEARCH_STEPS trials: take the best point with sufficient
-        decrease if there is one; else retry along −∇f without memory, or stop if that was it."""
-        moved = st.a_lo > 0
-        was_steepest = jnp.all(st.rho == 0)
-        retry = begin_search(st, st.x, st.f, st.g, st.S, st.Y, jnp.zeros_like(st.rho), st.newest, st.k)
-        retry = retry._replace(mode=jnp.where(was_steepest, DONE, retry.mode))
-        return jax.tree_util.tree_map(lambda a, b: jnp.where(moved, a, b), accept(st, st.a_lo, st.f_lo, st.g_lo),
-                                      retry)
-
-    def line_search(st, f, g):
-        """One step of the strong-Wolfe search with the value f and gradient g at x + a d."""
-        a, slope = st.a, jnp.vdot(g, st.d)
-        bad = ~jnp.isfinite(f) | ~jnp.isfinite(slope) | (f > st.f + C1 * a * st.slope0)
-        # strong Wolfe, or Hager–Zhang's approximate Wolfe conditions: near the minimum the
-        # decrease C1 a φ'(0) is below the round-off of f, which the exact test cannot see
-        approximate = ((f <= st.f + APPROX_DECREASE * jnp.abs(st.f)) & (slope >= C2 * st.slope0)
-                       & (slope <= (2 * APPROX_DELTA - 1) * st.slope0))
-        wolfe = (~bad & (jnp.abs(slope) <= -C2 * st.slope0)) | (jnp.isfinite(f) & approximate)
-        zooming = st.mode == ZOOM
-        # bracketing: too high (or no lower than the last trial) -> [last, a]; rising -> [a, last]
-        up = bad | ((st.trials > 0) & (f >= st.f_lo))
-        # zooming: too high -> hi = a; else a is the new lo (and hi = old lo if the slope says so)
-        up = jnp.where(zooming, bad | (f >= st.f_lo), up)
-        swap = ~up & (slope * (st.a_hi - st.a_lo) >= 0)
-        # the interval after this trial: (lo, hi) as (step, value, slope), lo's gradient too
-        lo = jax.tree_util.tree_map(lambda old, new: jnp.where(up, old, new),
-                                    (st.a_lo, st.f_lo, st.s_lo, st.g_lo), (a, f, slope, g))
-        hi_bracket = jax.tree_util.tree_map(lambda last, new: jnp.where(up, new, last),
-                                            (st.a_lo, st.f_lo, st.s_lo), (a, f, slope))
-        hi_zoom = jax.tree_util.tree_map(lambda hi, old_lo, new: jnp.where(up, new, jnp.where(swap, old_lo, hi)),
-                                         (st.a_hi, st.f_hi, st.s_hi), (st.a_lo, st.f_lo, st.s_lo), (a, f, slope))
-        # bracketing continues (doubling) while the slope is still negative and nothing failed
-        bracketed = zooming | up | (slope >= 0)
-        hi = jax.tree_util.tree_map(lambda z, b: jnp.where(zooming, z, b), hi_zoom, hi_bracket)
-        hi = jax.tree_util.tree_map(lambda h, old: jnp.where(bracketed, h, old), hi, (st.a_hi, st.f_hi, st.s_hi))
-        next_a = jnp.where(bracketed, _cubic_step(*lo[:3], *hi), GROWTH * a)
-        trials = st.trials + 1
-        searching = st._replace(mode=jnp.where(bracketed, ZOOM, BRACKET), a=next_a, z=st.x + next_a * st.d,
-                                a_lo=lo[0], f_lo=lo[1], s_lo=lo[2], g_lo=lo[3], a_hi=hi[0], f_hi=hi[1],
-                                s_hi=hi[2], trials=trials)
-        out = jax.lax.cond(trials >= LINE_SEARCH_STEPS, give_up, lambda s: s, searching)
-        return jax.lax.cond(wolfe, lambda s: accept(s, a, f, g), lambda s: out, st)
-
-    def adam_step(st, f, g):
-        updates, state = opt.update(g, st.adam, st.z)
-        return st._replace(z=optax.apply_updates(st.z, updates), adam_k=st.adam_k + 1, adam=state)
-
-    def after_adam(st, f, g):  # the point Adam ended at, evaluated: L-BFGS starts there
-        return begin_search(st, st.z, f, g, st.S, st.Y, st.rho, st.newest, st.k)
+                           trials=count, rho=jnp.where(steepest, 0.0, st.rho))
 
     def body(st):
         f, g = value_and_grad(st.z)  # the one evaluation site
         f = f.astype(dtype)
         st = st._replace(evaluations=st.evaluations + 1)
-        return jax.lax.switch(jnp.where(st.mode == ADAM, jnp.where(st.adam_k < adam_steps, 0, 1), 2),
-                              [adam_step, after_adam, line_search], st, f, g)
+        adam_phase = st.mode == ADAM
+        adamming = adam_phase & (st.adam_k < adam_steps)
+        updates, adam_state = opt.update(g, st.adam, st.z)
+        stepped = st._replace(z=optax.apply_updates(st.z, updates), adam_k=st.adam_k + 1, adam=adam_state)
+        # L-BFGS: accept this trial, or give up on the direction (take the best trial with
+        # sufficient decrease, else drop the memory and retry along −∇f, or stop if that was it)
+        acceptable, searching = _search_step(st, f, g)
+        searched = ~adam_phase & acceptable
+        give_up = ~adam_phase & ~acceptable & (searching.trials >= LINE_SEARCH_STEPS)
+        accepting = searched | give_up & (st.a_lo > 0)
+        retrying = give_up & ~accepting
+        a, f_new, g_new = _select(searched, (st.a, f, g), (st.a_lo, st.f_lo, st.g_lo))
+        s, y = a * st.d, g_new - st.g
+        sy = jnp.vdot(s, y)
+        keep = accepting & (sy > 0)  # a pair with s·y <= 0 would make H indefinite
+        slot = jnp.where(keep, (st.newest + 1) % MEMORY, st.newest)
+        memory = st._replace(S=st.S.at[slot].set(jnp.where(keep, s, st.S[slot])),
+                             Y=st.Y.at[slot].set(jnp.where(keep, y, st.Y[slot])),
+                             rho=jnp.where(retrying, 0.0, st.rho.at[slot].set(jnp.where(keep, 1 / sy, st.rho[slot]))),
+                             newest=slot)
+        x, f_new, g_new = _select(adam_phase, (st.z, f, g), _select(accepting, (st.x + s, f_new, g_new),
+                                                                     (st.x, st.f, st.g)))
+        begun = begin_search(memory, x, f_new, g_new, st.k + accepting)
+        begun = begun._replace(mode=jnp.where(retrying & jnp.all(st.rho == 0), DONE, begun.mode))
+        return _select(adamming, stepped, _select(adam_phase | accepting | retrying, begun, searching))
 
     nan = jnp.full((), jnp.nan, dtype)
     vec = jnp.zeros((n,), dtype)
-    start = _State(mode=jnp.asarray(ADAM), z=x0, adam_k=jnp.zeros((), jnp.int32), adam=opt.init(x0), x=x0, f=nan,
-                   g=vec, d=vec, slope0=zero, k=jnp.zeros((), jnp.int32), a=zero, a_lo=zero, f_lo=nan, s_lo=zero,
-                   g_lo=vec, a_hi=zero, f_hi=nan, s_hi=zero, trials=jnp.zeros((), jnp.int32),
-                   S=jnp.zeros((MEMORY, n), dtype), Y=jnp.zeros((MEMORY, n), dtype), rho=jnp.zeros((MEMORY,), dtype),
-                   newest=jnp.zeros((), jnp.int32), evaluations=jnp.zeros((), jnp.int32))
+    start = _State(mode=jnp.asarray(ADAM, jnp.int32), z=x0, adam_k=count, adam=opt.init(x0), x=x0, f=nan, g=vec,
+                   d=vec, slope0=zero, k=count, a=zero, a_lo=zero, f_lo=nan, s_lo=zero, g_lo=vec, a_hi=zero,
+                   f_hi=nan, s_hi=zero, trials=count, S=jnp.zeros((MEMORY, n), dtype),
+                   Y=jnp.zeros((MEMORY, n), dtype), rho=jnp.zeros((MEMORY,), dtype), newest=count,
+                   evaluations=count)
 
     # The loop's condition reads two of its variables (the mode and the evaluation count): XLA's
     # trip-count analysis, given a condition on one variable, clones everything that variable's
