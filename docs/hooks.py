@@ -119,6 +119,7 @@ with tempfile.TemporaryDirectory() as sockets:
 nbformat.write(nb, sys.argv[3])
 """
 
+
 def execute_notebooks(sources, out: pathlib.Path, small: bool = True) -> dict:
     """Execute every notebook at once (in parallel processes: compilation is single-threaded) into
     ``out``; {name: (exit code, stderr)}. ``small`` sets JAXSPLIT_NOTEBOOK_SMALL=1 (reduced sizes).

@@ -9,12 +9,12 @@ predicted trajectory (a spin lattice's S(q, ω): ``_fit_spins``). What reverse m
 keeps one state per observation and, while differentiating an interval, its steps;
 ``"reversible"`` runs each interval through ``integrate``'s reversible adjoint
 (``core._adjoints``), which rebuilds the interval's states by stepping back: one state per
-observation, memory flat in the steps per interval (``benchmarks/results/fit_spins.md``). The misfit is the mean squared
-residual over every observed component; Adam, then L-BFGS (``_minimise``: one loop that
-evaluates the loss and gradient at one place) minimise it, compiled once per configuration and
-data shape. The Gauss–Newton curvature
-JᵀJ of the residuals at the optimum gives the standard deviations (σ̂² (JᵀJ)⁻¹, σ̂² = RSS /
-(N − p)) and, through its eigenvalues and null vectors, what the data cannot determine.
+observation, memory flat in the steps per interval (``benchmarks/results/fit_spins.md``).
+The misfit is the mean squared residual over every observed component; Adam, then L-BFGS
+(``_minimise``: one loop that evaluates the loss and gradient at one place) minimise it,
+compiled once per configuration and data shape. The Gauss–Newton curvature JᵀJ of the
+residuals at the optimum gives the standard deviations (σ̂² (JᵀJ)⁻¹, σ̂² = RSS / (N − p)) and,
+through its eigenvalues and null vectors, what the data cannot determine.
 """
 
 import dataclasses

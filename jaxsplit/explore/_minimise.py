@@ -122,7 +122,7 @@ def _search_step(st, f, g):
     zooming = st.mode == ZOOM
     # bracketing: too high, or no lower than the last trial -> [last, a]; rising -> [a, last];
     # zooming: too high -> hi = a; else a is the new lo (hi = the old lo if the slope says so)
-    up = bad | (f >= st.f_lo) & (zooming | (st.trials > 0))
+    up = bad | ((f >= st.f_lo) & (zooming | (st.trials > 0)))
     swap = ~up & (slope * (st.a_hi - st.a_lo) >= 0)
     new, old_lo, old_hi = (a, f, slope), (st.a_lo, st.f_lo, st.s_lo), (st.a_hi, st.f_hi, st.s_hi)
     lo = _select(up, (*old_lo, st.g_lo), (*new, g))
