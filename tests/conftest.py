@@ -1,5 +1,6 @@
 """Tests run in float64: structure preservation is judged at round-off."""
 
+import importlib.metadata
 import importlib.util
 import os
 import pathlib
@@ -27,6 +28,30 @@ if os.environ["JAXSPLIT_TEST_JAX_CACHE"]:
     os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", os.environ["JAXSPLIT_TEST_JAX_CACHE"])
     os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0")
     os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES", "0")
+
+# XLA's CPU compiler emits each fused operation through its MLIR fusion emitters by default: an MLIR
+# context and pass pipeline per fusion, the largest share of the suite's compile time. Its legacy
+# LLVM emitter (xla_cpu_use_fusion_emitters=false) took the suite from 1274 to 914 s of CPU and 727
+# to 535 s wall (2026-11-27). Programs whose bits the suite compares with users' ones compile with
+# USERS_XLA instead (per program: ``.compile(compiler_options=USERS_XLA)``; in a child: ``users_env``).
+# XLA aborts on a flag it does not know, so only on the JAX series it was measured on (pyproject pins it).
+TEST_XLA_FLAGS = "--xla_cpu_use_fusion_emitters=false"
+USERS_XLA = {"xla_cpu_use_fusion_emitters": True}
+if importlib.metadata.version("jaxlib").startswith("0.10.") and "fusion_emitters" not in os.environ.get("XLA_FLAGS", ""):
+    os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {TEST_XLA_FLAGS}".strip()
+
+
+def with_test_xla_flags(flags: str = "") -> str:
+    """``XLA_FLAGS`` for a child process that sets flags of its own: those and the suite's."""
+    return f"{flags} {TEST_XLA_FLAGS}".strip() if TEST_XLA_FLAGS in os.environ.get("XLA_FLAGS", "") else flags
+
+
+def users_env(env: dict) -> dict:
+    """``env`` without the suite's compiler switches: a child compiles as users' programs do."""
+    flags = env.get("XLA_FLAGS", "").replace(TEST_XLA_FLAGS, "").strip()
+    return {k: v for k, v in env.items() if k != "XLA_FLAGS"} | ({"XLA_FLAGS": flags} if flags else {}) \
+        | {"JAX_DISABLE_MOST_OPTIMIZATIONS": "0"}
+
 
 import jax  # after the switches above: JAX reads them when it starts
 import pytest

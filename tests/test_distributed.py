@@ -15,6 +15,8 @@ import time
 
 import numpy as np
 
+from conftest import with_test_xla_flags
+
 DIST_TOL = 1e-13  # acceptance: 2 processes equal 1 process to 1e-13
 
 SCRIPT = textwrap.dedent("""
@@ -53,7 +55,7 @@ SCRIPT = textwrap.dedent("""
 
 def _launch(args, tmp_path, **kw):
     env = dict(os.environ, JAX_PLATFORMS="cpu")
-    env.pop("XLA_FLAGS", None)  # one CPU device per process
+    env["XLA_FLAGS"] = with_test_xla_flags()  # one CPU device per process
     return subprocess.run([sys.executable, "-m", "jaxsplit.launch", *args], cwd=tmp_path, env=env,
                           capture_output=True, text=True, timeout=120, check=False, **kw)
 
@@ -61,7 +63,7 @@ def _launch(args, tmp_path, **kw):
 def test_two_processes_equal_one(tmp_path):
     (tmp_path / "run.py").write_text(SCRIPT)
     env = dict(os.environ, JAX_PLATFORMS="cpu")
-    env.pop("XLA_FLAGS", None)
+    env["XLA_FLAGS"] = with_test_xla_flags()
     one = subprocess.run([sys.executable, "run.py", "one.npz"], cwd=tmp_path, env=env, capture_output=True,
                          text=True, timeout=120, check=False)  # not launched: initialize_from_env is a no-op
     assert one.returncode == 0, one.stderr[-3000:]

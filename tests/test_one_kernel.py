@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import jaxsplit
+from conftest import USERS_XLA
 from jaxsplit.core import _one_kernel
 
 OURS = 'inlineable="false"'  # XLA's own small-loop pass tags xla_cpu_small_call alone
@@ -30,14 +31,20 @@ def limit():
     set_limit(default)
 
 
-def compiled(fn):
+def _compile(fn, *args, **options):
     """``fn`` jitted as a new function: traced, lowered and compiled anew (no cached program
     from another limit; clearing JAX's caches instead cost the worker's other tests theirs)."""
-    return jax.jit(lambda *args: fn(*args))
+    return jax.jit(lambda *a: fn(*a)).lower(*args).compile(compiler_options=options)
+
+
+def compiled(fn):
+    """``fn`` compiled anew, with XLA's CPU emitters as users compile: the suite's own switch
+    (``conftest``) emits the untagged loop otherwise than the one kernel, equal only to round-off."""
+    return lambda *args: _compile(fn, *args, **USERS_XLA)(*args)
 
 
 def program(fn, *args):
-    return compiled(fn).lower(*args).compile().as_text()
+    return _compile(fn, *args).as_text()
 
 
 def free_run(scheme, b, n=300, h=0.3):

@@ -15,6 +15,7 @@ import textwrap
 import numpy as np
 import pytest
 
+from conftest import with_test_xla_flags
 from jaxsplit import distributed
 from jaxsplit.core._errors import InputError
 
@@ -67,11 +68,11 @@ def _child_env(**extra):
     env = dict(os.environ, JAX_PLATFORMS="cpu")
     for name in ("XLA_FLAGS", distributed.COORDINATOR, distributed.NUM_PROCESSES, distributed.PROCESS_ID):
         env.pop(name, None)
-    return env | extra
+    return env | {"XLA_FLAGS": with_test_xla_flags()} | extra
 
 
 def test_four_devices_equal_one_device_compiled_once(tmp_path):
-    env = _child_env(XLA_FLAGS="--xla_force_host_platform_device_count=4")
+    env = _child_env(XLA_FLAGS=with_test_xla_flags("--xla_force_host_platform_device_count=4"))
     proc = subprocess.run([sys.executable, "-c", FOUR_DEVICES], cwd=tmp_path, env=env, capture_output=True,
                           text=True, timeout=180, check=False)
     assert proc.returncode == 0, proc.stderr[-3000:]

@@ -6,6 +6,8 @@ import subprocess
 import sys
 import textwrap
 
+from conftest import with_test_xla_flags
+
 SHARD_TOL = 1e-15  # acceptance: sharded and unsharded sweeps agree to 1e-15
 
 SCRIPT = textwrap.dedent("""
@@ -25,7 +27,7 @@ SCRIPT = textwrap.dedent("""
 
 
 def test_sharded_sweep_equals_single_device():
-    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu")
+    env = dict(os.environ, XLA_FLAGS=with_test_xla_flags("--xla_force_host_platform_device_count=4"), JAX_PLATFORMS="cpu")
     proc = subprocess.run([sys.executable, "-c", SCRIPT], env=env, capture_output=True, text=True, timeout=300, check=False)
     assert proc.returncode == 0, proc.stderr[-3000:]
     result = json.loads(proc.stdout.strip().splitlines()[-1])

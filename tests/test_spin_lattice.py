@@ -215,11 +215,14 @@ def test_long_run_keeps_lengths_and_bounded_energy():
     energy, length_error = run(s0)
     assert float(jnp.max(length_error)) < ROUND_OFF
     error = np.abs(np.asarray(energy) - float(system.hamiltonian(s0)))
-    first, second = error[: blocks // 2].max(), error[blocks // 2:].max()
-    assert 1e-6 < first < 5e-2 and second < 1.5 * first  # a splitting's error: present, bounded, not growing
+    assert 1e-6 < error.max() < 5e-2  # a splitting's error: present and bounded
+    # not growing: the mean error of the two halves (their ratio 0.94-1.03 over seeds 4-8 and
+    # either CPU emitter; the maximum, an extreme of a chaotic fluctuation, ranged 0.81-1.71)
+    first, second = error[: blocks // 2].mean(), error[blocks // 2:].mean()
+    assert second < 1.2 * first, (first, second)
     t = h * per_block * np.arange(1, blocks + 1)
     drift = abs(np.polyfit(t, np.asarray(energy), 1)[0]) * t[-1]
-    assert drift < 0.1 * first
+    assert drift < 0.1 * error[: blocks // 2].max()
 
 
 def test_lattice_shaped_float32_state_keeps_shape_and_dtype():
