@@ -30,6 +30,14 @@ economized as ``so3``'s kernel, to a quarter of the dtype's epsilon) where its r
 twice that bound, or beyond it the full-range kernel (``so3.half_turn``: a square root, a
 Cody–Waite reduction, a division). The switch is evaluated at run time: one program for every
 h, J and spin length.
+
+The native kernel. XLA's CPU emitter forms no multi-output fusion, so its kernel evaluated a
+pair's sum, polynomials and cross products once per new component (six times a pair). On a CPU
+with one device ``_pair_kernel.cc`` (``jaxsplit._native``: built on first use with the machine's
+C++ compiler) runs the colour instead: one pass, in place, the same polynomials and tier test
+(beyond the first tier the C library's cos and sin), within a few ulp of the XLA kernel
+(``tests/test_native.py``). Sharded programs, other backends and other dtypes keep the XLA
+kernel, as does any machine where it cannot be built (``jaxsplit._native.native_status()``).
 """
 
 import dataclasses
@@ -41,6 +49,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import _native
 from ..core._compose import Composition
 from ..core._flows import AbstractFlow
 from .so3 import _economized, _horner, half_turn
@@ -143,9 +152,22 @@ class PairExchange(AbstractFlow):
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(3, 4, 5))
 def _pair_flow(x, jt, tier, d, axis, parity):
-    """The colour's flow, the kernel of tier ``tier`` (``TIERS``; past the last, the full range)."""
+    """The colour's flow: the native kernel (``_native``) where it runs, else the XLA kernel of
+    tier ``tier`` (``TIERS``; past the last, the full range)."""
+    if _native.pair_kernel_available(x.dtype) and len(TIERS) == 1:  # the kernel has one tier
+        return _native_flow(x, jt, tier, d, axis, parity)
     branches = [functools.partial(_kernel, d=d, axis=axis, parity=parity, limit=limit) for limit in TIERS + (None,)]
     return jax.lax.switch(tier, branches, x, jt)
+
+
+def _native_flow(x, jt, tier, d, axis, parity):
+    """The colour's flow by ``_pair_kernel.cc``, in one pass and in place: the first tier's
+    polynomials where ``tier`` is 0, else the C library's cos and sin."""
+    cos_c, sin_c = (jnp.asarray(c, x.dtype) for c in _coefficients(TIERS[0], np.dtype(x.dtype).name))
+    call = jax.ffi.ffi_call(_native.TARGET, jax.ShapeDtypeStruct(x.shape, x.dtype), vmap_method="broadcast_all",
+                            input_output_aliases={0: 0})
+    return call(x, jnp.asarray(jt, x.dtype), jnp.asarray(tier, jnp.int32), cos_c, sin_c, d=np.int64(d),
+                axis=np.int64(axis), parity=np.int64(parity))
 
 
 @_pair_flow.defjvp
