@@ -26,6 +26,7 @@ from pathlib import Path
 if typing.TYPE_CHECKING:
     from . import lattices as lattices
     from . import systems as systems
+    from ._native import native_status as native_status
     from ._xla_cpu import compiler_options as compiler_options
     from ._xla_cpu import tune_cpu as tune_cpu
     from .checks._invariants import InvariantErrors as InvariantErrors
