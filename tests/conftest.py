@@ -32,10 +32,12 @@ if os.environ["JAXSPLIT_TEST_JAX_CACHE"]:
 # XLA's CPU compiler emits each fused operation through its MLIR fusion emitters by default: an MLIR
 # context and pass pipeline per fusion, the largest share of the suite's compile time. Its legacy
 # LLVM emitter (xla_cpu_use_fusion_emitters=false) took the suite from 1274 to 914 s of CPU and 727
-# to 535 s wall (2026-11-27). Programs whose bits the suite compares with users' ones compile with
-# USERS_XLA instead (per program: ``.compile(compiler_options=USERS_XLA)``; in a child: ``users_env``).
+# to 535 s wall (2026-11-27); one LLVM module per program instead of one per thread (the workers
+# fill both cores already) 5-9 % less CPU again (test_adjoints + test_core_stepper: 128 -> 116 and
+# 124 -> 120 s). Programs whose bits the suite compares with users' ones compile with USERS_XLA
+# instead (per program: ``.compile(compiler_options=USERS_XLA)``; in a child: ``users_env``).
 # XLA aborts on a flag it does not know, so only on the JAX series it was measured on (pyproject pins it).
-TEST_XLA_FLAGS = "--xla_cpu_use_fusion_emitters=false"
+TEST_XLA_FLAGS = "--xla_cpu_use_fusion_emitters=false --xla_cpu_parallel_codegen_split_count=1"
 USERS_XLA = {"xla_cpu_use_fusion_emitters": True}
 if importlib.metadata.version("jaxlib").startswith("0.10.") and "fusion_emitters" not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {TEST_XLA_FLAGS}".strip()
