@@ -88,7 +88,13 @@ def _registered() -> bool:
     path = _library()
     if path is None:
         return False
-    library = ctypes.cdll.LoadLibrary(path)
+    try:
+        library = ctypes.cdll.LoadLibrary(path)
+    except OSError as err:  # a library another machine or a damaged disk left in the cache
+        _STATUS["pair flow"] = f"could not load {path}: {err}"
+        warnings.warn(f"jaxsplit: the native pair kernel was not loaded, the XLA path runs: {_STATUS['pair flow']} "
+                      "(delete the file to rebuild it)", RuntimeWarning, stacklevel=3)
+        return False
     jax.ffi.register_ffi_target(TARGET, jax.ffi.pycapsule(library.JaxsplitPairFlow), platform="cpu")
     return True
 

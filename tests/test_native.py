@@ -90,7 +90,7 @@ def test_a_program_calls_it_only_where_it_applies(built):
     assert not _native.pair_kernel_available(jnp.bfloat16) and not _native.pair_kernel_available(jnp.int32)
 
 
-def test_without_a_compiler_or_switched_off_the_xla_path_runs_and_says_why(monkeypatch, tmp_path):
+def test_without_a_compiler_switched_off_or_damaged_the_xla_path_runs_and_says_why(monkeypatch, tmp_path):
     monkeypatch.setenv("JAXSPLIT_CACHE", str(tmp_path))
     try:
         monkeypatch.setenv("CXX", "/bin/false")
@@ -102,7 +102,16 @@ def test_without_a_compiler_or_switched_off_the_xla_path_runs_and_says_why(monke
         monkeypatch.setenv("JAXSPLIT_NATIVE", "0")
         _native._library.cache_clear()
         assert _native._library() is None and _native.native_status()["pair flow"] == "off (JAXSPLIT_NATIVE=0)"
+        monkeypatch.delenv("JAXSPLIT_NATIVE")
+        monkeypatch.delenv("CXX")
+        _native._library.cache_clear()
+        monkeypatch.setattr(_native, "_library", lambda: str(tmp_path / "damaged.so"))  # a damaged cached library
+        (tmp_path / "damaged.so").write_bytes(b"not a library")
+        _native._registered.cache_clear()
+        with pytest.warns(RuntimeWarning, match="not loaded, the XLA path runs"):
+            assert not _native._registered()
     finally:
         monkeypatch.undo()
         _native._library.cache_clear()
-        _native._library()  # as it was: the status names the library again
+        _native._registered.cache_clear()
+        _native._registered()  # as it was (registering the target again is harmless): the status names the library
