@@ -7,9 +7,9 @@ per component. ``systems/_pair_kernel.cc`` evaluates them once, as an XLA FFI cu
 It is built the first time a program needs it (never on import): ``$CXX`` or ``c++`` with
 ``-O3 -march=native`` against the headers jaxlib ships (``jax.ffi.include_dir()``), into
 ``$JAXSPLIT_CACHE`` (default ``~/.cache/jaxsplit``), keyed by the source, the flags, jaxlib's
-version and the machine, written atomically (processes may race). Where it cannot be built (no
-compiler, a failed build) the XLA path runs, the same maps to round-off, and ``native_status()``
-says why (one warning when a build fails). ``JAXSPLIT_NATIVE=0`` turns it off (read once, at the
+version and the machine, written atomically (processes may race). Where it cannot be built or
+loaded (no compiler, a failed build, a damaged cached library) the XLA path runs, the same maps to
+round-off, and ``native_status()`` says why (one warning when a build or a load fails). ``JAXSPLIT_NATIVE=0`` turns it off (read once, at the
 first program that asks). Only on a CPU backend with one device: a custom call is opaque to XLA's
 partitioner, so sharded programs keep the XLA path (``distributed``).
 """

@@ -3,8 +3,6 @@ kernel it replaces: the same map to a few ulp in every layout (chain, square, si
 4-d lattice, leading batch axes, both parities, the wrapped pair, a lattice of 2), both tiers,
 float64 and float32, under vmap and grad; and what happens where it cannot be built."""
 
-import functools
-
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -16,12 +14,6 @@ from jaxsplit.systems import _spin_pairs as pairs
 ULPS = 16  # measured: at most 7 ulp between the two (fused multiply-adds, the C library's cos and sin)
 LAYOUTS = [((), (8,)), ((2,), (6, 4)), ((), (4, 6, 8)), ((2,), (4, 2, 6)), ((), (2,))]
 JT = (0.1, 0.9, 2.0, 6.0, -3.0)  # tier 0 (2|J t| max s <= 2) and the full range beyond it
-
-
-def _xla(x, jt, tier, d, axis, parity):
-    branches = [functools.partial(pairs._kernel, d=d, axis=axis, parity=parity, limit=limit)
-                for limit in pairs.TIERS + (None,)]
-    return jax.lax.switch(tier, branches, x, jt)
 
 
 def _tier(jt):
@@ -48,7 +40,7 @@ def test_the_native_kernel_is_the_xla_kernel(built, dtype):
         x = jnp.asarray(x / np.linalg.norm(x, axis=len(lead), keepdims=True), dtype)
         d = len(shape)
         native = jax.jit(pairs._native_flow, static_argnums=(3, 4, 5))
-        xla = jax.jit(_xla, static_argnums=(3, 4, 5))
+        xla = jax.jit(pairs._xla_flow, static_argnums=(3, 4, 5))
         for axis in range(d):
             for parity in (0, 1):
                 for jt in JT:
@@ -66,7 +58,7 @@ def test_vmap_over_jt_and_the_gradient(built):
     x = jnp.asarray(np.random.default_rng(1).normal(size=(3, 4, 6)))
     jts = jnp.asarray([0.1, 0.5, 3.0])  # tiers 0, 0, 1 in one call
     native = jax.vmap(lambda jt: pairs._native_flow(x, jt, _tier(jt), 2, 1, 1))(jts)
-    xla = jax.vmap(lambda jt: _xla(x, jt, _tier(jt), 2, 1, 1))(jts)
+    xla = jax.vmap(lambda jt: pairs._xla_flow(x, jt, _tier(jt), 2, 1, 1))(jts)
     assert float(jnp.max(jnp.abs(native - xla))) < 1e-14
 
     def loss(jt, y):

@@ -156,6 +156,11 @@ def _pair_flow(x, jt, tier, d, axis, parity):
     tier ``tier`` (``TIERS``; past the last, the full range)."""
     if _native.pair_kernel_available(x.dtype) and len(TIERS) == 1:  # the kernel has one tier
         return _native_flow(x, jt, tier, d, axis, parity)
+    return _xla_flow(x, jt, tier, d, axis, parity)
+
+
+def _xla_flow(x, jt, tier, d, axis, parity):
+    """The colour's flow by XLA: the kernel of tier ``tier`` under a ``lax.switch``."""
     branches = [functools.partial(_kernel, d=d, axis=axis, parity=parity, limit=limit) for limit in TIERS + (None,)]
     return jax.lax.switch(tier, branches, x, jt)
 
