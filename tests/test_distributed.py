@@ -14,7 +14,6 @@ import textwrap
 import time
 
 import numpy as np
-
 from conftest import with_test_xla_flags
 
 DIST_TOL = 1e-13  # acceptance: 2 processes equal 1 process to 1e-13

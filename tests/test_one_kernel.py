@@ -7,9 +7,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import USERS_XLA
 
 import jaxsplit
-from conftest import USERS_XLA
 from jaxsplit.core import _one_kernel
 
 OURS = 'inlineable="false"'  # XLA's own small-loop pass tags xla_cpu_small_call alone

@@ -14,8 +14,8 @@ import textwrap
 
 import numpy as np
 import pytest
-
 from conftest import with_test_xla_flags
+
 from jaxsplit import distributed
 from jaxsplit.core._errors import InputError
 
@@ -76,7 +76,7 @@ def test_four_devices_equal_one_device_compiled_once(tmp_path):
     proc = subprocess.run([sys.executable, "-c", FOUR_DEVICES], cwd=tmp_path, env=env, capture_output=True,
                           text=True, timeout=180, check=False)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    out = eval(proc.stdout.strip().splitlines()[-1])  # noqa: S307 - our own child's repr of floats and strings
+    out = eval(proc.stdout.strip().splitlines()[-1])
     assert out["spins"] <= SHARD_TOL and out["bodies"] <= SHARD_TOL, out
     assert out["moved"] > 0.05, out  # the spins moved
     assert out["compiled"] == 1, out
