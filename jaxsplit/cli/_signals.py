@@ -23,8 +23,8 @@ delivery, in the mode of that moment) or, when the main thread has not run Pytho
 main thread's mode cannot change while it waits). So Ctrl-C ends a fit at once even in the
 middle of an XLA computation.
 
-When ``main`` is the process, it ends through ``end_process``: the signals are blocked,
-one that came at any moment makes the status 130, and no teardown follows.
+When ``main`` is the process, it ends through ``end_process``: a signal that came at any
+moment before the status is decided makes it 130, and no teardown follows.
 
 A signal that was ignored when the process started (``nohup``, background jobs) stays
 ignored, as Python itself does for SIGINT.
@@ -61,6 +61,7 @@ class Policy:
         self._cleanups: list = []
         self._previous: dict = {}
         self._pipe = None  # (read fd, write fd, previous wakeup fd)
+        self._acting = threading.RLock()  # reading a byte and recording its signal are one step
 
     @property
     def requested(self) -> bool:
@@ -132,9 +133,13 @@ class Policy:
         except OSError:  # BlockingIOError: the other reader took the bytes
             return b""
 
+    def _take(self):
+        with self._acting:
+            self._signalled(self._read())
+
     def _handle(self, signum, frame=None):
         """The Python-level handler (main thread, between bytecodes): act on the bytes now."""
-        self._signalled(self._read())
+        self._take()
 
     def _watch(self, read_fd: int, stop_fd: int):
         """Act on signal bytes the main thread has not read within ``STUCK_SECONDS``."""
@@ -143,7 +148,7 @@ class Policy:
             if stop_fd in ready:
                 return
             time.sleep(STUCK_SECONDS)
-            self._signalled(self._read())
+            self._take()
 
     # ------------------------------------------------------------------ installation
     def install(self):
@@ -182,30 +187,36 @@ class Policy:
                 os.close(fd)
 
 
-def _pending() -> set:
-    return set(signal.sigpending()) & set(SIGNALS)
-
-
 def end_process(status: int, stop: Policy):
     """End the process now: with ``status``, or 130 when a signal arrived at any moment
-    before it is gone (the documented status of an interrupted run, also for a signal that
-    comes after the last output is written). The signals are blocked first, so one arriving
-    from then on stays pending, or (taken by another thread) left its byte in the wakeup pipe,
-    and is counted here; no interpreter teardown follows (a signal there was once ignored,
-    turning 130 into 0 in 6 runs of 10). Only a signal after ``os._exit`` (the kernel
-    releasing the process) finds the status decided."""
-    signal.pthread_sigmask(signal.SIG_BLOCK, SIGNALS)  # this thread's mask: XLA's threads may still take one,
-    for stream in (sys.stdout, sys.stderr):  # and then its byte is in the wakeup pipe
-        with contextlib.suppress(Exception):  # e.g. a closed pipe
-            stream.flush()
-    late = stop.received
-    if late is None:
-        late = next(iter(stop._read()), None) or min(_pending(), default=None)
+    before the status is decided (the documented status of an interrupted run, also for a
+    signal that comes after the last output is written). No interpreter teardown follows (a
+    signal there was once ignored, turning 130 into 0 in 6 runs of 10).
+
+    The signals stay unblocked in this thread on purpose: the kernel gives a signal sent to
+    the process to its main thread whenever that thread accepts it, and there its byte is in
+    the wakeup pipe before the next line runs. Blocking them here (as this once did) sent a
+    late signal to one of XLA's threads, whose byte could come after the look below (exit 0,
+    seen once in CI)."""
+    with stop.critical():  # from here a signal is only recorded
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):  # e.g. a closed pipe
+                stream.flush()
+        late = _late_signal(stop)
     if late is not None and status == 0:
         os.write(2, f"jaxsplit: interrupted ({signal.Signals(late).name}) after the work was done; "
                     "every output is complete\n".encode())
         status = EXIT_INTERRUPTED
     os._exit(status)
+
+
+def _late_signal(stop: Policy) -> int | None:
+    """The first signal of the run: recorded, queued but not yet delivered, or delivered with
+    its byte still unread (the helper thread reads it and records it under the same lock)."""
+    with stop._acting:
+        pending = set(signal.sigpending()) & set(SIGNALS)
+        stop._signalled(stop._read())
+        return stop.received if stop.received is not None else min(pending, default=None)
 
 
 _CURRENT: list[Policy] = []
