@@ -172,7 +172,23 @@ def _short_polynomials(dtype_name: str, limit: Fraction):
     return _economized(0, limit, tolerance), _economized(1, limit, tolerance)
 
 
+def _plain(*arrays) -> bool:
+    """Whether lax's primitives may stand for the operators on ``arrays``: one shape and one
+    dtype, none weakly typed, so the operators' promotion and broadcasting would change
+    nothing. Each operator on a traced array goes through ``jnp``'s promotion, a nested ``jit``
+    of its own: ~70 µs a call against ~25 µs, and these kernels are traced for every rotation
+    of every program (a third of the suite's ``jnp`` calls came from ``_horner``)."""
+    kinds = [jax.typeof(a) for a in arrays]
+    return all(k.shape == kinds[0].shape and k.dtype == kinds[0].dtype and not k.weak_type for k in kinds)
+
+
 def _horner(coefficients, x):
+    if _plain(x):  # the same operations as below, without the promotion (see ``_plain``)
+        dtype = jnp.result_type(x)
+        acc = np.asarray(coefficients[-1], dtype)
+        for a in coefficients[-2::-1]:
+            acc = jax.lax.add(jax.lax.mul(acc, x), np.asarray(a, dtype))
+        return acc
     acc = coefficients[-1]
     for a in coefficients[-2::-1]:
         acc = acc * x + a
@@ -204,8 +220,13 @@ def half_turn(phi):
     pieces, inverse_pi, bound, cos_c, sin_c = _kernel_constants(np.dtype(phi.dtype).name)
     n = jnp.round(phi * inverse_pi)
     r = phi
-    for piece in pieces:
-        r = r - n * piece
+    if _plain(phi):  # the same operations, without the promotion (see ``_plain``)
+        dtype = jnp.result_type(phi)
+        for piece in pieces:
+            r = jax.lax.sub(r, jax.lax.mul(n, np.asarray(piece, dtype)))
+    else:
+        for piece in pieces:
+            r = r - n * piece
     # where φ's own rounding exceeds π (float32 beyond ~1e7) n is off by a few: r stays in the
     # polynomials' range, so the pair stays a unit pair (the angle was never resolved there)
     r = jnp.clip(r, -bound, bound)
@@ -311,6 +332,11 @@ def _turn_axis(x, axis: int, c, s, select: bool = True):
     it changes: x_i + 2 sin(θ/2)(cos(θ/2) x_j − sin(θ/2) x_i), x_j − 2 sin(θ/2)(cos(θ/2) x_i + sin(θ/2) x_j)."""
     i, j = (axis + 1) % 3, (axis + 2) % 3
     xi, xj = x[..., i], x[..., j]
+    if _plain(xi, xj, c, s):  # the same operations as below, without the promotion (see ``_plain``)
+        add, sub, mul = jax.lax.add, jax.lax.sub, jax.lax.mul
+        u = add(s, s)
+        return _with_components(x, {i: add(xi, mul(u, sub(mul(c, xj), mul(s, xi)))),
+                                    j: sub(xj, mul(u, add(mul(c, xi), mul(s, xj))))}, select)
     u = s + s
     return _with_components(x, {i: xi + u * (c * xj - s * xi), j: xj - u * (c * xi + s * xj)}, select)
 
