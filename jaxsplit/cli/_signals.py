@@ -109,12 +109,19 @@ class Policy:
     # ------------------------------------------------------------------ acting on signals
     def _signalled(self, data: bytes):
         """Act on delivered signals (one byte each), in the current mode."""
+        signum = self._record(data)
+        if signum is not None:
+            self.abandon(signum)
+
+    def _record(self, data: bytes) -> int | None:
+        """Count and record the signals; the one to abandon with where the mode says so."""
         for signum in data:
             self.count += 1
             if self.received is None:
                 self.received = signum
             if self.mode == "abandon" or (self.mode == "defer" and self.count > 1):
-                self.abandon(signum)
+                return signum
+        return None
 
     def abandon(self, signum: int):
         for fn in reversed(list(self._cleanups)):
@@ -134,8 +141,10 @@ class Policy:
             return b""
 
     def _take(self):
-        with self._acting:
-            self._signalled(self._read())
+        with self._acting:  # a byte read is a signal recorded (``_late_signal`` looks under this lock)
+            signum = self._record(self._read())
+        if signum is not None:  # outside the lock: abandoning flushes stdout, which may wait for
+            self.abandon(signum)  # the main thread, itself in a write whose EINTR ran our handler
 
     def _handle(self, signum, frame=None):
         """The Python-level handler (main thread, between bytecodes): act on the bytes now."""
@@ -215,7 +224,7 @@ def _late_signal(stop: Policy) -> int | None:
     its byte still unread (the helper thread reads it and records it under the same lock)."""
     with stop._acting:
         pending = set(signal.sigpending()) & set(SIGNALS)
-        stop._signalled(stop._read())
+        stop._record(stop._read())  # critical: recorded only
         return stop.received if stop.received is not None else min(pending, default=None)
 
 
