@@ -190,7 +190,7 @@ def test_fit_interrupted_while_printing_prints_the_whole_result(sig, monkeypatch
 
 
 @pytest.mark.parametrize("sig,moment", [("SIGINT", "end_process"), ("SIGTERM", "end_process"),
-                                        ("SIGTERM", "_late_signal")], ids=["SIGINT", "SIGTERM", "SIGTERM-deciding"])
+                                        ("SIGTERM", "Policy._late_signal")], ids=["SIGINT", "SIGTERM", "SIGTERM-deciding"])
 def test_a_signal_after_the_last_output_exits_130(zygote, tmp_path, sig, moment):
     """A late signal (the last file written, the status decided, the process still alive)
     gives the documented 130, never 0: when ``end_process`` begins and while it decides the

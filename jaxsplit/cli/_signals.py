@@ -146,6 +146,14 @@ class Policy:
         if signum is not None:  # outside the lock: abandoning flushes stdout, which may wait for
             self.abandon(signum)  # the main thread, itself in a write whose EINTR ran our handler
 
+    def _late_signal(self) -> int | None:
+        """The first signal of the run: recorded, queued but not yet delivered, or delivered with
+        its byte still unread (the helper thread reads it and records it under the same lock)."""
+        with self._acting:
+            pending = set(signal.sigpending()) & set(SIGNALS)
+            self._record(self._read())  # critical (``end_process``): recorded only
+            return self.received if self.received is not None else min(pending, default=None)
+
     def _handle(self, signum, frame=None):
         """The Python-level handler (main thread, between bytecodes): act on the bytes now."""
         self._take()
@@ -211,21 +219,12 @@ def end_process(status: int, stop: Policy):
         for stream in (sys.stdout, sys.stderr):
             with contextlib.suppress(Exception):  # e.g. a closed pipe
                 stream.flush()
-        late = _late_signal(stop)
+        late = stop._late_signal()
     if late is not None and status == 0:
         os.write(2, f"jaxsplit: interrupted ({signal.Signals(late).name}) after the work was done; "
                     "every output is complete\n".encode())
         status = EXIT_INTERRUPTED
     os._exit(status)
-
-
-def _late_signal(stop: Policy) -> int | None:
-    """The first signal of the run: recorded, queued but not yet delivered, or delivered with
-    its byte still unread (the helper thread reads it and records it under the same lock)."""
-    with stop._acting:
-        pending = set(signal.sigpending()) & set(SIGNALS)
-        stop._record(stop._read())  # critical: recorded only
-        return stop.received if stop.received is not None else min(pending, default=None)
 
 
 _CURRENT: list[Policy] = []

@@ -42,6 +42,7 @@ leaves last.
 
 import functools
 import math
+import operator
 from fractions import Fraction
 
 import equinox as eqx
@@ -182,16 +183,21 @@ def _plain(*arrays) -> bool:
     return all(k.shape == kinds[0].shape and k.dtype == kinds[0].dtype and not k.weak_type for k in kinds)
 
 
+def _arithmetic(*arrays):
+    """(add, sub, mul, const) for a kernel on ``arrays``: lax's primitives and constants in
+    their dtype where ``_plain``, else the operators and the constants as given. Either way the same
+    program, equation for equation."""
+    if not _plain(*arrays):
+        return operator.add, operator.sub, operator.mul, lambda a: a
+    dtype = jax.typeof(arrays[0]).dtype
+    return jax.lax.add, jax.lax.sub, jax.lax.mul, lambda a: np.asarray(a, dtype)
+
+
 def _horner(coefficients, x):
-    if _plain(x):  # the same operations as below, without the promotion (see ``_plain``)
-        dtype = jnp.result_type(x)
-        acc = np.asarray(coefficients[-1], dtype)
-        for a in coefficients[-2::-1]:
-            acc = jax.lax.add(jax.lax.mul(acc, x), np.asarray(a, dtype))
-        return acc
-    acc = coefficients[-1]
+    add, _, mul, const = _arithmetic(x)
+    acc = const(coefficients[-1])
     for a in coefficients[-2::-1]:
-        acc = acc * x + a
+        acc = add(mul(acc, x), const(a))
     return acc
 
 
@@ -220,13 +226,9 @@ def half_turn(phi):
     pieces, inverse_pi, bound, cos_c, sin_c = _kernel_constants(np.dtype(phi.dtype).name)
     n = jnp.round(phi * inverse_pi)
     r = phi
-    if _plain(phi):  # the same operations, without the promotion (see ``_plain``)
-        dtype = jnp.result_type(phi)
-        for piece in pieces:
-            r = jax.lax.sub(r, jax.lax.mul(n, np.asarray(piece, dtype)))
-    else:
-        for piece in pieces:
-            r = r - n * piece
+    _, sub, mul, const = _arithmetic(phi)
+    for piece in pieces:
+        r = sub(r, mul(n, const(piece)))
     # where φ's own rounding exceeds π (float32 beyond ~1e7) n is off by a few: r stays in the
     # polynomials' range, so the pair stays a unit pair (the angle was never resolved there)
     r = jnp.clip(r, -bound, bound)
@@ -332,13 +334,10 @@ def _turn_axis(x, axis: int, c, s, select: bool = True):
     it changes: x_i + 2 sin(θ/2)(cos(θ/2) x_j − sin(θ/2) x_i), x_j − 2 sin(θ/2)(cos(θ/2) x_i + sin(θ/2) x_j)."""
     i, j = (axis + 1) % 3, (axis + 2) % 3
     xi, xj = x[..., i], x[..., j]
-    if _plain(xi, xj, c, s):  # the same operations as below, without the promotion (see ``_plain``)
-        add, sub, mul = jax.lax.add, jax.lax.sub, jax.lax.mul
-        u = add(s, s)
-        return _with_components(x, {i: add(xi, mul(u, sub(mul(c, xj), mul(s, xi)))),
-                                    j: sub(xj, mul(u, add(mul(c, xi), mul(s, xj))))}, select)
-    u = s + s
-    return _with_components(x, {i: xi + u * (c * xj - s * xi), j: xj - u * (c * xi + s * xj)}, select)
+    add, sub, mul, _ = _arithmetic(xi, xj, c, s)
+    u = add(s, s)
+    return _with_components(x, {i: add(xi, mul(u, sub(mul(c, xj), mul(s, xi)))),
+                                j: sub(xj, mul(u, add(mul(c, xi), mul(s, xj))))}, select)
 
 
 def rotate(x, axis: int, angle):
